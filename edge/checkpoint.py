@@ -1,0 +1,71 @@
+"""Checkpoint files: weights plus the `ModelMeta` that says how to use them.
+
+A checkpoint is a ``torch.save`` dict::
+
+    {"format": "depthseg-checkpoint", "version": 1, "meta": ModelMeta.to_dict(),
+     "state_dict": model weights, "epoch": int, "best_val_loss": float | None,
+     "history": [per-epoch dicts], "optimizer": optimizer state (training checkpoints only)}
+
+Written atomically (temp file + rename), so an interrupted save never destroys the previous one.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from edge.errors import ModelError
+from edge.frames import atomic_path
+from edge.meta import ModelMeta
+from edge.model import FCN8s, build_model, count_parameters
+
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "CHECKPOINT_FORMAT"]
+
+CHECKPOINT_FORMAT = "depthseg-checkpoint"
+
+
+def save_checkpoint(path: str | Path, model: FCN8s, meta: ModelMeta, **extra: Any) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = meta.with_(params=count_parameters(model))
+    blob = {"format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(), "state_dict": model.state_dict()}
+    blob.update(extra)
+    tmp = atomic_path(path)
+    try:
+        torch.save(blob, tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """The raw checkpoint dict, after checking it is one of ours."""
+    p = Path(path)
+    if not p.exists():
+        raise ModelError(f"{p}: no such model file")
+    if p.is_dir():
+        raise ModelError(f"{p}: is a directory, expected a .pt checkpoint")
+    try:
+        blob = torch.load(p, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means a corrupt file
+        raise ModelError(f"{p}: not a readable depthseg checkpoint ({type(exc).__name__}); re-train or re-download it") from None
+    if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
+        raise ModelError(f"{p}: not a depthseg checkpoint (no '{CHECKPOINT_FORMAT}' format tag)")
+    return blob
+
+
+def load_checkpoint(path: str | Path) -> tuple[FCN8s, ModelMeta, dict[str, Any]]:
+    """(model in eval mode, its metadata, the raw dict)."""
+    blob = read_checkpoint(path)
+    meta = ModelMeta.from_dict(blob["meta"])
+    model = build_model(meta)
+    try:
+        model.load_state_dict(blob["state_dict"])
+    except (RuntimeError, KeyError) as exc:
+        raise ModelError(f"{path}: weights do not match the architecture in its metadata ({str(exc)[:200]})") from None
+    model.eval()
+    return model, meta, blob
