@@ -1,0 +1,96 @@
+"""Labelled frames for training: loaded once from simulated MCAP, preprocessed per batch.
+
+Why in memory: 10,000 frames of 171 x 224 float32 depth plus labels take ~2 GB, far less than
+the machine has, and decoding MCAP every epoch would cost more than the CPU forward pass.
+Preprocessing runs per batch through `edge.preprocess` (the one implementation), so what the
+network sees in training is exactly what it sees in eval, export and replay.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from edge.errors import DataError
+from edge.frames import iter_frames
+from edge.preprocess import preprocess
+
+__all__ = ["FrameSet", "load_frames", "split_indices", "make_batch"]
+
+
+@dataclass
+class FrameSet:
+    depth: np.ndarray  # float32 [N, H, W], metres, 0 invalid
+    label: np.ndarray  # uint8 [N, H, W]
+
+    def __len__(self) -> int:
+        return len(self.depth)
+
+    def subset(self, idx: np.ndarray) -> FrameSet:
+        return FrameSet(self.depth[idx], self.label[idx])
+
+
+def load_frames(paths: list[str | Path], limit: int | None = None, progress=None) -> FrameSet:
+    """All labelled frames of one size from MCAP files/directories (unlabelled frames refused)."""
+    depths: list[np.ndarray] = []
+    labels: list[np.ndarray] = []
+    for path in paths:
+        for fr in iter_frames(path):
+            if fr.label is None:
+                raise DataError(f"{path}: frame at {fr.stamp_ns} ns has no label; training needs /pico_flexx/labels")
+            if depths and fr.depth.shape != depths[0].shape:
+                raise DataError(f"{path}: frames of different sizes {fr.depth.shape} vs {depths[0].shape}")
+            depths.append(np.nan_to_num(fr.depth, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32))
+            labels.append(fr.label.astype(np.uint8))
+            if progress is not None:
+                progress.update(1)
+            if limit and len(depths) >= limit:
+                break
+        if limit and len(depths) >= limit:
+            break
+    if not depths:
+        raise DataError(f"no labelled frames found in {[str(p) for p in paths]}")
+    return FrameSet(np.stack(depths), np.stack(labels))
+
+
+def split_indices(n: int, fractions: tuple[float, float, float], seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Deterministic shuffled train/val/test index split (the paper's 70/20/10 by default)."""
+    if n < 3:
+        raise DataError(f"need at least 3 frames to split into train/val/test, got {n}")
+    perm = np.random.default_rng(seed).permutation(n)
+    a = max(1, int(round(fractions[0] * n)))
+    b = max(1, int(round(fractions[1] * n)))
+    a = min(a, n - 2)
+    return perm[:a], perm[a : a + b], perm[a + b :]
+
+
+def make_batch(
+    fs: FrameSet, idx: np.ndarray, channels: int, multiple: int, rng: np.random.Generator | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x [B,C,Hp,Wp], target [B,1,Hp,Wp], loss mask [B,1,Hp,Wp]); augment when ``rng`` is given.
+
+    Augmentations a depth user would want and that keep the frame size: horizontal flip,
+    vertical flip (together: a 180-degree rotation). A 90-degree rotation would change
+    171 x 224 into 224 x 171, which the sensor never produces, so it is not used.
+    """
+    xs, ts, ms = [], [], []
+    for i in idx:
+        d, lab = fs.depth[i], fs.label[i]
+        if rng is not None:
+            if rng.random() < 0.5:
+                d, lab = d[:, ::-1], lab[:, ::-1]
+            if rng.random() < 0.5:
+                d, lab = d[::-1, :], lab[::-1, :]
+        p = preprocess(d, channels=channels, multiple=multiple)
+        hp, wp = p.x.shape[-2:]
+        t = np.zeros((1, hp, wp), np.float32)
+        m = np.zeros((1, hp, wp), np.float32)
+        h, w = lab.shape
+        t[0, :h, :w] = lab
+        m[0, :h, :w] = p.valid
+        xs.append(p.x)
+        ts.append(t)
+        ms.append(m)
+    return np.stack(xs), np.stack(ts), np.stack(ms)

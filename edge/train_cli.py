@@ -1,0 +1,136 @@
+"""``depthseg-train``: fit an FCN-8s on simulated MCAP frames (paper Algorithm 1)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+from edge.cliutil import print_json, progress, run
+from edge.errors import ConfigError
+
+PROG = "depthseg-train"
+
+EPILOG = """\
+examples:
+  depthseg-sim --out data/train --frames 5000 --seed 1
+  depthseg-train --data data/train --out runs/small --encoder vgg11 --batch-norm --width 0.125
+  depthseg-train --data data/train --out runs/small --resume          # continue an interrupted run
+  depthseg-train --train-dir a/ --val-dir b/ --encoder vgg16 --encoder-weights vgg16.pth \\
+      --freeze-encoder --lr 1e-5 --lr-schedule constant              # the paper's setting
+
+The best weights (lowest validation loss) are in OUT/best.pt; OUT/last.pt is the resumable
+state; OUT/log.csv and OUT/loss.png show the curves (like the paper's Fig. 4).
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG,
+        description="Train the FCN-8s segmentation model on labelled depth frames (masked BCE, Adam, early stopping).",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    d = p.add_argument_group("data")
+    d.add_argument("--data", nargs="+", help="MCAP files/directories, split train/val/test by --split")
+    d.add_argument("--train-dir", nargs="+", help="explicit training MCAP files/directories")
+    d.add_argument("--val-dir", nargs="+", help="explicit validation MCAP files/directories")
+    d.add_argument("--split", default="0.7,0.2,0.1", help="train,val,test fractions for --data (default: %(default)s, the paper's)")
+    d.add_argument("--limit", type=int, help="use at most this many frames (quick experiments)")
+    m = p.add_argument_group("model")
+    m.add_argument("--encoder", default="vgg16", help="vgg11, vgg13, vgg16 or vgg19 (default: %(default)s, the paper's)")
+    m.add_argument("--width", type=float, default=1.0, help="channel width multiplier (1.0 = paper; 0.125 = the shipped default)")
+    m.add_argument("--batch-norm", action="store_true", help="batch norm after each encoder conv (helps from scratch; folded away in ONNX)")
+    m.add_argument("--in-channels", type=int, default=3, choices=(1, 3), help="3 = depth replicated (paper); 1 = single channel")
+    m.add_argument("--extra-skip", action="store_true", help="also fuse pool2 and pool1 (paper V.d)")
+    m.add_argument("--encoder-weights", help="local torchvision VGG state_dict file (ImageNet weights); default: from scratch")
+    m.add_argument("--freeze-encoder", action="store_true", help="train only the decoder (the paper's setting with pretrained weights)")
+    t = p.add_argument_group("training")
+    t.add_argument("--out", required=True, help="run directory (checkpoints, log.csv, loss.png)")
+    t.add_argument("--epochs", type=int, default=100)
+    t.add_argument("--batch-size", type=int, default=16)
+    t.add_argument("--lr", type=float, default=1e-3, help="Adam step size (default %(default)s from scratch; paper 1e-5 frozen)")
+    t.add_argument("--lr-schedule", default="cosine", choices=("cosine", "constant"))
+    t.add_argument("--patience", type=int, default=10, help="stop after this many epochs without a better val loss")
+    t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
+    t.add_argument("--no-augment", action="store_true", help="disable flips")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--threads", type=int, default=2, help="torch intra-op threads (default %(default)s)")
+    t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+
+    def body() -> int:
+        from edge.data import load_frames, split_indices
+        from edge.meta import ModelMeta
+        from edge.train import TrainConfig, train
+
+        if bool(args.data) == bool(args.train_dir):
+            raise ConfigError("give either --data (split automatically) or --train-dir with --val-dir")
+        if args.train_dir and not args.val_dir:
+            raise ConfigError("--train-dir needs --val-dir (validation frames for early stopping)")
+        try:
+            fr = tuple(float(v) for v in args.split.split(","))
+        except ValueError:
+            fr = ()
+        if len(fr) != 3 or any(v < 0 for v in fr) or abs(sum(fr) - 1) > 1e-6:
+            raise ConfigError(f"--split must be three fractions summing to 1, e.g. 0.7,0.2,0.1; got '{args.split}'")
+        cfg = TrainConfig(
+            epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
+            patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
+            max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
+        )
+        meta = ModelMeta(encoder=args.encoder, width=args.width, in_channels=args.in_channels,
+                         batch_norm=args.batch_norm, extra_skip=args.extra_skip)
+        with progress(desc="loading frames", unit="frame") as bar:
+            if args.data:
+                allf = load_frames(args.data, limit=args.limit, progress=bar)
+                tr, va, _te = split_indices(len(allf), fr, args.seed)
+                train_set, val_set = allf.subset(tr), allf.subset(va)
+            else:
+                train_set = load_frames(args.train_dir, limit=args.limit, progress=bar)
+                val_set = load_frames(args.val_dir, progress=bar)
+        info = {
+            "command": " ".join([PROG] + [shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])]),
+            "data": [str(p) for p in (args.data or args.train_dir)],
+            "input": "Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel",
+            "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",
+        }
+        steps = -(-len(train_set) // cfg.batch_size)
+        bar = progress(total=steps, desc="epoch", unit="batch")
+
+        def on_batch(b: int, loss: float) -> None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{loss:.4f}")
+
+        def on_epoch(row: dict) -> None:
+            bar.reset()
+            bar.set_description(f"epoch {row['epoch'] + 1}")
+            print(f"epoch {row['epoch'] + 1:3d}  train {row['train_loss']:.4f}  val {row['val_loss']:.4f}  "
+                  f"val IoU {row['val_iou']:.4f}  lr {row['lr']:.2e}  {row['epoch_seconds']:.0f}s", file=sys.stderr, flush=True)
+
+        res = train(meta, train_set, val_set, args.out, cfg, resume=args.resume, on_batch=on_batch,
+                    on_epoch=on_epoch, training_info=info)
+        bar.close()
+        summary = {
+            "best_epoch": res.best_epoch + 1, "best_val_loss": res.best_val_loss, "epochs_run": res.epochs_run,
+            "minutes": round(res.minutes, 2), "best": str(res.best_path), "train_frames": len(train_set),
+            "val_frames": len(val_set),
+            "val_iou": next((h["val_iou"] for h in res.history if h["epoch"] == res.best_epoch), None),
+        }
+        if args.json:
+            print_json(summary)
+        else:
+            print(f"best epoch {summary['best_epoch']} (val loss {res.best_val_loss:.4f}, val IoU "
+                  f"{summary['val_iou']:.4f}) after {res.epochs_run} epochs, {res.minutes:.1f} min -> {res.best_path}")
+        return 0
+
+    return run(PROG, body)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
