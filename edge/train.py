@@ -213,7 +213,7 @@ def train(
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            lv = float(loss)
+            lv = float(loss.detach())
             batch_losses.append(lv)
             run_loss += lv
             if on_batch:
