@@ -92,6 +92,7 @@ class FrameWriter:
         img = self._w.register_schema(rosmsg.IMAGE_TYPE, "ros2msg", rosmsg.IMAGE_MSGDEF.encode())
         info = self._w.register_schema(rosmsg.CAMERA_INFO_TYPE, "ros2msg", rosmsg.CAMERA_INFO_MSGDEF.encode())
         scene = self._w.register_schema("depthseg/Scene", "jsonschema", _SCENE_SCHEMA)
+        self._image_schema = img
         self._ch = {
             TOPIC_DEPTH: self._w.register_channel(TOPIC_DEPTH, "cdr", img),
             TOPIC_LABELS: self._w.register_channel(TOPIC_LABELS, "cdr", img),
@@ -129,6 +130,18 @@ class FrameWriter:
         if scene is not None:
             add(TOPIC_SCENE, json.dumps(scene, sort_keys=True).encode())
         self.count += 1
+
+    def write_image(self, topic: str, stamp_ns: int, array: np.ndarray, encoding: str) -> None:
+        """One extra sensor_msgs/msg/Image on ``topic`` (e.g. an amplitude image beside the depth).
+
+        The channel is registered on first use. Call it with the frame's stamp, before `write` of
+        the same frame, so stamp and sequence number pair it with the depth message.
+        """
+        if topic not in self._ch:
+            self._ch[topic] = self._w.register_channel(topic, "cdr", self._image_schema)
+        t = int(stamp_ns)
+        data = rosmsg.encode_image(t, FRAME_ID, np.asarray(array), encoding)
+        self._w.add_message(self._ch[topic], log_time=t, publish_time=t, data=data, sequence=self.count)
 
     def close(self) -> None:
         self._w.finish()
