@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -69,7 +70,7 @@ def _channels(files: list[Path]) -> dict[str, int]:
                     continue
                 for _s, ch, _m in reader.iter_messages():
                     topics[ch.topic] = topics.get(ch.topic, 0) + 1
-        except (McapError, ValueError, OSError) as exc:
+        except (McapError, ValueError, OSError, EOFError, struct.error) as exc:
             raise DataError(f"{f}: not a readable MCAP file ({type(exc).__name__}: {str(exc)[:120]})") from None
     # a registered channel without messages (e.g. labels never written) is not data
     return {t: n for t, n in topics.items() if n > 0}

@@ -1,0 +1,237 @@
+"""Evaluation end to end: predictors, streaming scores, figures, baseline and the CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from edge import defaults
+from edge.errors import ConfigError, DataError, ModelError
+from edge.eval_cli import main as eval_main
+from edge.evaluate import COLORS, evaluate, render_figure
+from edge.frames import Frame, FrameWriter, iter_frames
+from edge.meta import ModelMeta, fov_intrinsics
+from edge.metrics import MetricAccumulator, predict_mask
+from edge.predict import Predictor, load_predictor
+
+H, W = 64, 96
+TINY = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, threshold=0.5)
+
+
+def scene(i: int) -> tuple[np.ndarray, np.ndarray]:
+    """A flat floor at ~0.3 m with a 2-4 cm box (frame 0 has no object) and a few invalid pixels."""
+    rng = np.random.default_rng(i)
+    depth = np.full((H, W), 0.3, np.float32) + rng.normal(0, 0.001, (H, W)).astype(np.float32)
+    label = np.zeros((H, W), np.uint8)
+    if i:
+        r, c = 10 + 5 * i, 20 + 7 * i
+        label[r : r + 15, c : c + 20] = 1
+        depth[label == 1] -= 0.02 + 0.01 * (i % 3)
+    depth[:2, :3] = 0.0
+    depth[-1, -4:] = np.nan
+    return depth, label
+
+
+def write_frames(path: Path, n: int = 4, labels: bool = True) -> Path:
+    k = fov_intrinsics(W, H, 62.0, 45.0)
+    with FrameWriter(path) as w:
+        for i in range(n):
+            d, lab = scene(i)
+            w.write(i * 100_000_000, d, lab if labels else None, intrinsics=k)
+    return path
+
+
+@pytest.fixture(scope="module")
+def tiny_ckpt(tmp_path_factory) -> Path:
+    import torch
+
+    from edge.checkpoint import save_checkpoint
+    from edge.model import build_model
+
+    torch.manual_seed(0)
+    p = tmp_path_factory.mktemp("model") / "tiny.pt"
+    save_checkpoint(p, build_model(TINY), TINY.with_(threshold=0.4))
+    return p
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("data")
+    write_frames(d / "a.mcap", 3)
+    write_frames(d / "b.mcap", 2)
+    return d
+
+
+def mem_frames(n: int = 4) -> list[Frame]:
+    return [Frame(depth=d, stamp_ns=i, label=lab) for i, (d, lab) in enumerate(scene(i) for i in range(n))]
+
+
+class Oracle(Predictor):
+    """Logits (+/-5) from the labels of the frame whose depth it is given; optionally inverted."""
+
+    def __init__(self, frames: list[Frame], invert: bool = False):
+        self.meta = TINY
+        self.name = "oracle"
+        self.invert = invert
+        self.labels = {fr.depth.tobytes(): fr.label for fr in frames}
+
+    def logits(self, depth):
+        s = np.where(self.labels[depth.tobytes()] > 0, 5.0, -5.0).astype(np.float32)
+        return -s if self.invert else s
+
+
+def test_perfect_and_inverted_predictions():
+    frames = mem_frames()
+    r = evaluate(Oracle(frames), iter(frames))
+    assert r.frames == 4
+    assert (r.metrics.pixel_accuracy, r.metrics.iou, r.metrics.precision, r.metrics.recall) == (1, 1, 1, 1)
+    r = evaluate(Oracle(frames, invert=True), iter(frames))
+    assert r.metrics.pixel_accuracy == 0.0 and r.metrics.iou == 0.0 and r.metrics.pooled_iou == 0.0
+    # frame 0 has no objects: everything predicted object -> precision 0, recall 1
+    assert r.metrics.recall == pytest.approx(1 / 4)
+    assert r.metrics.precision == 0.0
+
+
+def test_invalid_pixels_do_not_count():
+    frames = mem_frames(2)
+    for fr in frames:
+        fr.label = fr.label.copy()
+        fr.label[~(np.isfinite(fr.depth) & (fr.depth > 0))] = 1  # labels on invalid pixels: ignored
+    oracle = Oracle(mem_frames(2))
+    r = evaluate(oracle, iter(frames))
+    assert r.metrics.iou == 1.0 and r.metrics.pixel_accuracy == 1.0
+
+
+def test_scores_come_from_the_model(tiny_ckpt, data):
+    p = load_predictor(tiny_ckpt, threads=1)
+    assert p.meta.threshold == 0.4 and p.name == str(tiny_ckpt)
+    r = evaluate(p, iter_frames(data))
+    assert r.frames == 5 and r.threshold == 0.4
+    acc = MetricAccumulator()
+    for fr in iter_frames(data):
+        logits = p.logits(fr.depth)
+        assert logits.shape == (H, W) and logits.dtype == np.float32
+        acc.add(predict_mask(logits, 0.4), fr.label, np.isfinite(fr.depth) & (fr.depth > 0))
+    assert r.metrics == acc.summary()
+    r2 = evaluate(p, iter_frames(data), threshold=0.9, limit=2)
+    assert r2.frames == 2 and r2.threshold == 0.9
+
+
+def test_baseline_and_figures(tiny_ckpt, data, tmp_path):
+    p = load_predictor(tiny_ckpt, threads=1)
+    figs = tmp_path / "figs"
+    r = evaluate(p, iter_frames(data), baseline=True, figures_dir=figs, max_figures=2)
+    assert r.baseline is not None and r.baseline.frames == 5
+    assert r.baseline.iou > 0.9  # boxes 2-4 cm above a flat floor
+    assert [f.name for f in r.figures] == ["frame_000000.png", "frame_000001.png"]
+    assert sorted(f.name for f in figs.iterdir()) == ["frame_000000.png", "frame_000001.png"]
+    r = evaluate(p, iter_frames(data), figures_dir=figs, max_figures=1, figure_pick="worst")
+    assert len(r.figures) == 1 and r.figures[0].name.startswith("worst_")
+    d = r.to_dict()
+    assert d["figures"] == [str(r.figures[0])]
+
+
+def test_figure_colours():
+    import cv2
+
+    depth, label = scene(1)
+    pred = np.zeros_like(label, bool)
+    pred[0:5, 40:50] = True  # false object
+    img = render_figure(depth, label, pred, scale=1)
+    assert img.dtype == np.uint8 and img.ndim == 3
+    colours = {tuple(int(v) for v in c) for c in img.reshape(-1, 3)}
+    for name in ("correct background", "missed object", "false object", "invalid", "correct object"):
+        assert COLORS[name] in colours, name
+    ok, _ = cv2.imencode(".png", img)
+    assert ok
+
+
+def test_unlabelled_frames_are_counted_and_none_is_an_error(tiny_ckpt, tmp_path):
+    p = load_predictor(tiny_ckpt, threads=1)
+    f = write_frames(tmp_path / "nolab.mcap", 2, labels=False)
+    with pytest.raises(DataError, match="no labelled frames"):
+        evaluate(p, iter_frames(f))
+
+
+def test_bad_arguments(tiny_ckpt, data):
+    p = load_predictor(tiny_ckpt, threads=1)
+    with pytest.raises(ConfigError):
+        evaluate(p, iter_frames(data), threshold=1.0)
+    with pytest.raises(ConfigError):
+        evaluate(p, iter_frames(data), figure_pick="best")
+    with pytest.raises(ConfigError):
+        evaluate(p, iter_frames(data), limit=0)
+
+
+def test_load_predictor_errors_and_default(tmp_path, monkeypatch, tiny_ckpt):
+    with pytest.raises(ModelError, match="no such model"):
+        load_predictor(tmp_path / "missing.pt")
+    (tmp_path / "m.bin").write_bytes(b"x")
+    with pytest.raises(ModelError, match="unknown model type"):
+        load_predictor(tmp_path / "m.bin")
+    (tmp_path / "bad.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ModelError, match="not a readable depthseg checkpoint"):
+        load_predictor(tmp_path / "bad.pt")
+    monkeypatch.setattr(defaults, "DEFAULT_CHECKPOINT", tmp_path / "none.pt")
+    monkeypatch.setattr(defaults, "DEFAULT_ONNX", tmp_path / "none.onnx")
+    with pytest.raises(ModelError, match="default model is missing"):
+        load_predictor(None)
+    monkeypatch.setattr(defaults, "DEFAULT_CHECKPOINT", tiny_ckpt)
+    assert load_predictor(None).name == str(tiny_ckpt)
+
+
+# ------------------------------------------------------------------------------------------ CLI
+
+
+def test_cli_json_keys(tiny_ckpt, data, capsys):
+    assert eval_main(["--model", str(tiny_ckpt), "--data", str(data), "--json", "--threads", "1"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for k in ("frames", "pixel_accuracy", "iou", "precision", "recall", "threshold", "pooled_iou"):
+        assert k in out, k
+    assert out["frames"] == 5 and out["threshold"] == 0.4
+    for k in ("pixel_accuracy", "iou", "precision", "recall", "pooled_iou"):
+        assert 0.0 <= out[k] <= 1.0
+    assert "baseline" not in out
+
+
+def test_cli_table_baseline_and_figures(tiny_ckpt, data, tmp_path, capsys):
+    figs = tmp_path / "figs"
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(data / "a.mcap"), "--baseline", "--figures", str(figs),
+                    "--max-figures", "2", "--threshold", "0.6", "--threads", "1"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "Pixel acc." in out and "Pooled IoU" in out and "RANSAC plane + 8 mm" in out
+    assert "3 frames, threshold 0.6" in out
+    assert len(list(figs.glob("*.png"))) == 2
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(data), "--baseline", "--json", "--limit", "2"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 2
+    b = out["baseline"]
+    for k in ("frames", "pixel_accuracy", "iou", "precision", "recall", "threshold", "pooled_iou"):
+        assert k in b, k
+    assert b["frames"] == 2 and b["threshold"] == 0.008 and b["iou"] > 0.9
+
+
+def test_cli_no_labels_is_one_line_error(tiny_ckpt, tmp_path, capsys):
+    f = write_frames(tmp_path / "nolab.mcap", 2, labels=False)
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(f)])
+    err = capsys.readouterr().err
+    assert rc != 0
+    assert len(err.strip().splitlines()) == 1
+    assert "no label topic" in err and "/pico_flexx/image_depth" in err and "Traceback" not in err
+
+
+def test_cli_bad_inputs(tiny_ckpt, tmp_path, capsys):
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(tmp_path / "nothing")])
+    assert rc == 2 and "no such file" in capsys.readouterr().err
+    (tmp_path / "junk.mcap").write_bytes(b"garbage")
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(tmp_path / "junk.mcap")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "not a readable MCAP" in err and len(err.strip().splitlines()) == 1
+    data = write_frames(tmp_path / "ok.mcap", 1)
+    rc = eval_main(["--model", str(tmp_path / "missing.onnx"), "--data", str(data)])
+    assert rc == 2 and "no such model file" in capsys.readouterr().err
