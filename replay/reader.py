@@ -1,0 +1,766 @@
+"""Stream depth frames out of any MCAP recording: ROS 2 bags, Foxglove recordings, our simulations.
+
+Why a reader of our own instead of ``mcap.reader.make_reader(...).iter_messages()``:
+
+- **Bounded memory.** The non-seeking reader sorts by log time, which loads the whole file, and
+  the seeking one needs an intact summary. We walk the records in file order (recorders write in
+  arrival order), one chunk at a time, so a recording of any length streams in constant memory.
+- **Damage is expected.** Robots lose power mid-recording. A truncated or corrupt file is read
+  up to the damage (chunk CRCs are checked, record lengths are clamped to the file), the frames
+  before it are delivered, and then one `McapDataError` says where and what broke.
+- **The user should not need to know the topic.** The depth topic is found from the schemas
+  (``sensor_msgs/msg/Image``, ``foxglove.RawImage``), the pixel encoding of its first message
+  (32FC1 metres, 16UC1 millimetres; REP 118) and the topic name; when that is ambiguous or
+  empty, the error lists the candidates so ``--topic`` is one copy-paste away.
+
+Decoders: ROS 2 CDR through `edge.rosmsg` (size-checked against height x step before any pixel is
+trusted), foxglove ``RawImage`` in protobuf (schema = FileDescriptorSet, `mcap_protobuf`) and in
+JSON (``data`` base64, as Foxglove writes it). Invalid depth pixels (0, NaN, negative, inf) are
+passed through untouched: `edge.preprocess` owns what counts as invalid.
+
+Labels (mono8, nonzero = object) are paired with depth frames by header timestamp (log time when
+the header stamp is 0) within a tolerance, looking at most ``window`` frames ahead.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import os
+import re
+import struct
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.records import Channel, Chunk, Header, Message, Schema
+from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, breakup_chunk
+
+from edge import rosmsg
+from edge.errors import DepthsegError, McapDataError
+from edge.frames import Frame
+
+__all__ = [
+    "DepthStream",
+    "open_depth_stream",
+    "DEPTH_ENCODINGS",
+    "LABEL_ENCODINGS",
+    "MessageHook",
+]
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+# pixel encoding -> metres per unit. mono16 only when chosen with --topic (the pico flexx
+# driver publishes its grey image as mono16, so it is never auto-detected as depth).
+DEPTH_ENCODINGS: dict[str, float] = {"32FC1": 1.0, "64FC1": 1.0, "16UC1": 0.001, "mono16": 0.001}
+AUTO_DEPTH_ENCODINGS = frozenset({"32FC1", "64FC1", "16UC1"})
+LABEL_ENCODINGS = frozenset({"mono8", "8UC1"})
+
+ROS_IMAGE_TYPES = frozenset({"sensor_msgs/msg/Image", "sensor_msgs/Image"})
+FOXGLOVE_IMAGE_TYPES = frozenset({"foxglove.RawImage", "foxglove_msgs/msg/RawImage"})
+CAMERA_INFO_TYPES = frozenset({"sensor_msgs/msg/CameraInfo", "sensor_msgs/CameraInfo"})
+# name tokens of 32FC1 topics that are not the depth image (noise sigma, our noise-free copy...)
+_NOT_DEPTH_TOKENS = frozenset(
+    {"clean", "noise", "label", "labels", "mask", "conf", "confidence", "amplitude", "intensity",
+     "ir", "gray", "grey", "overlay", "sigma", "std", "disparity", "depthseg"}
+)
+_DECODABLE = {"cdr": "ROS 2 CDR", "protobuf": "protobuf", "json": "JSON"}
+
+PEEK_BYTES = 64 * 1024 * 1024  # how far to look for the first message of each image topic
+MAX_CHUNK_BYTES = 1 << 30  # a chunk claiming more than this decompressed is corrupt, not data
+DEFAULT_WINDOW = 32  # frames a depth frame may wait for its label
+DEFAULT_TOLERANCE_NS = 1_000_000  # 1 ms: labels share the depth header stamp in practice
+
+MessageHook = Callable[[Schema | None, Channel, Message], None]
+
+
+@dataclass
+class _Img:
+    """An image message of any source, before its pixels are trusted."""
+
+    stamp_ns: int
+    frame_id: str
+    height: int
+    width: int
+    encoding: str
+    is_bigendian: int
+    step: int
+    data: Any  # bytes-like
+
+    def as_ros(self) -> rosmsg.RosImage:
+        return rosmsg.RosImage(
+            self.stamp_ns, self.frame_id, self.height, self.width, self.encoding,
+            self.is_bigendian, self.step, memoryview(self.data),
+        )
+
+
+@dataclass
+class _TopicInfo:
+    topic: str
+    schema_name: str
+    schema_encoding: str
+    message_encoding: str
+    channel_ids: list[int] = field(default_factory=list)
+    first_encoding: str | None = None  # pixel encoding of the first message seen
+    first_size: tuple[int, int] | None = None
+    peek_error: str | None = None
+
+    @property
+    def kind(self) -> str:
+        if self.schema_name in ROS_IMAGE_TYPES or self.schema_name in FOXGLOVE_IMAGE_TYPES:
+            return "image"
+        if self.schema_name.endswith("RawImage"):
+            return "image"
+        if self.schema_name in CAMERA_INFO_TYPES:
+            return "info"
+        return "other"
+
+    def describe(self) -> str:
+        bits = [self.schema_name or "(no schema)"]
+        if self.first_encoding:
+            bits.append(self.first_encoding)
+        if self.first_size:
+            bits.append(f"{self.first_size[1]}x{self.first_size[0]}")
+        if self.message_encoding not in _DECODABLE:
+            bits.append(f"message encoding '{self.message_encoding}'")
+        if self.peek_error:
+            bits.append("unreadable")
+        return f"{self.topic} ({', '.join(bits)})"
+
+
+class _Damage(Exception):
+    """Raised by the record walker; carries the byte offset for the user-facing message."""
+
+    def __init__(self, offset: int, what: str) -> None:
+        super().__init__(what)
+        self.offset = offset
+        self.what = what
+
+
+class _ClampedFile:
+    """File wrapper whose reads never ask for more than what is left of the file.
+
+    A corrupt length field would otherwise make the buffered reader allocate gigabytes before
+    discovering that the bytes are not there.
+    """
+
+    def __init__(self, fh, size: int) -> None:
+        self._fh = fh
+        self.size = size
+        self.pos = 0
+
+    def read(self, n: int = -1) -> bytes:
+        left = self.size - self.pos
+        if n is None or n < 0 or n > left:
+            n = left
+        data = self._fh.read(n)
+        self.pos += len(data)
+        return data
+
+
+def _describe_exc(exc: BaseException) -> str:
+    name = type(exc).__name__
+    if name == "EndOfFile":
+        return "the file ends in the middle of a record (truncated recording?)"
+    if name == "InvalidMagic":
+        return "bad MCAP magic bytes (not the end of a complete MCAP file)"
+    if isinstance(exc, CRCValidationError):
+        return f"checksum mismatch ({exc}): the data is corrupt"
+    if name == "RecordLengthLimitExceeded":
+        return f"impossible record length ({exc}): the data is corrupt"
+    text = str(exc).strip() or name
+    return f"unreadable record ({name}: {text[:160]})"
+
+
+def _walk(
+    path: Path,
+    size: int,
+    schemas: dict[int, Schema],
+    channels: dict[int, Channel],
+    header_out: list[Header] | None = None,
+    position: list[int] | None = None,
+) -> Iterator[tuple[Schema | None, Channel, Message]]:
+    """Messages in file order; `_Damage` at the first record that cannot be read."""
+    with open(path, "rb") as raw:
+        fh = _ClampedFile(raw, size)
+        reader = StreamReader(fh, emit_chunks=True, validate_crcs=True, record_size_limit=size)
+        records = reader.records
+        while True:
+            start = fh.pos
+            try:
+                rec = next(records)
+            except StopIteration:
+                return
+            except DepthsegError:
+                raise
+            except Exception as exc:  # any parse failure of third-party code is damage, by design
+                raise _Damage(start, _describe_exc(exc)) from None
+            if position is not None:
+                position[0] = fh.pos
+            if isinstance(rec, Chunk):
+                if rec.uncompressed_size > MAX_CHUNK_BYTES:
+                    raise _Damage(start, f"chunk claims {rec.uncompressed_size} bytes uncompressed: corrupt")
+                try:
+                    inner = breakup_chunk(rec, validate_crc=True)
+                except Exception as exc:
+                    raise _Damage(start, "chunk " + _describe_exc(exc)) from None
+            else:
+                inner = (rec,)
+            for r in inner:
+                if isinstance(r, Message):
+                    ch = channels.get(r.channel_id)
+                    if ch is None:
+                        raise _Damage(start, f"message refers to channel id {r.channel_id}, which is never defined")
+                    yield (schemas.get(ch.schema_id) if ch.schema_id else None), ch, r
+                elif isinstance(r, Schema):
+                    schemas[r.id] = r
+                elif isinstance(r, Channel):
+                    channels[r.id] = r
+                elif isinstance(r, Header) and header_out is not None:
+                    header_out.append(r)
+
+
+# ---------------------------------------------------------------------------- decoders
+
+
+def _ros_image(data: bytes, what: str) -> _Img:
+    m = rosmsg.decode_image(data, what=what)
+    return _Img(m.stamp_ns, m.frame_id, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
+
+
+def _json_image(data: bytes, what: str) -> _Img:
+    try:
+        d = json.loads(bytes(data))
+        ts = d.get("timestamp") or {}
+        sec = int(ts.get("sec", 0))
+        nsec = int(ts.get("nsec", ts.get("nanosec", 0)))
+        raw = base64.b64decode(d["data"], validate=True)
+        return _Img(
+            sec * 1_000_000_000 + nsec, str(d.get("frame_id", "")), int(d["height"]), int(d["width"]),
+            str(d["encoding"]), 0, int(d["step"]), raw,
+        )
+    except (ValueError, KeyError, TypeError, AttributeError, binascii.Error) as exc:
+        raise McapDataError(f"{what}: not a foxglove RawImage JSON message ({type(exc).__name__}: {exc})") from None
+
+
+def _protobuf_class(schema: Schema, topic: str):
+    from mcap_protobuf.decoder import DecoderFactory
+
+    try:
+        dec = DecoderFactory().decoder_for("protobuf", schema)
+    except Exception as exc:  # a broken FileDescriptorSet raises whatever protobuf raises
+        raise McapDataError(
+            f"{topic}: protobuf schema '{schema.name}' cannot be loaded ({type(exc).__name__}: {exc}); "
+            "the schema data must be a serialized FileDescriptorSet"
+        ) from None
+    if dec is None:
+        raise McapDataError(f"{topic}: schema '{schema.name}' has encoding '{schema.encoding}', expected 'protobuf'")
+    return dec
+
+
+def _protobuf_image(decode, data: bytes, what: str) -> _Img:
+    try:
+        m = decode(data)
+        ts = m.timestamp
+        return _Img(
+            int(ts.seconds) * 1_000_000_000 + int(ts.nanos), m.frame_id, int(m.height), int(m.width),
+            m.encoding, 0, int(m.step), m.data,
+        )
+    except DepthsegError:
+        raise
+    except Exception as exc:
+        raise McapDataError(f"{what}: not a foxglove.RawImage protobuf message ({type(exc).__name__}: {exc})") from None
+
+
+def _camera_info(decode_obj, data: bytes, what: str) -> dict[str, Any]:
+    if decode_obj is None:
+        return rosmsg.decode_camera_info(data, what=what)
+    kind, dec = decode_obj
+    try:
+        m = json.loads(bytes(data)) if kind == "json" else dec(data)
+        get = (lambda k, d=None: m.get(k, d)) if kind == "json" else (lambda k, d=None: getattr(m, k, d))
+        k = list(get("K") or get("k") or [])
+        return {
+            "frame_id": get("frame_id", ""), "height": int(get("height", 0)), "width": int(get("width", 0)),
+            "distortion_model": get("distortion_model", ""), "d": list(get("D") or get("d") or []),
+            "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5],
+        }
+    except DepthsegError:
+        raise
+    except Exception as exc:
+        raise McapDataError(f"{what}: unreadable camera calibration ({type(exc).__name__}: {exc})") from None
+
+
+class _ChannelDecoder:
+    """Turns the raw bytes of one channel into an `_Img` (or CameraInfo dict); built once per channel."""
+
+    def __init__(self, schema: Schema | None, channel: Channel) -> None:
+        self.topic = channel.topic
+        enc = channel.message_encoding
+        name = schema.name if schema else ""
+        if enc not in _DECODABLE:
+            raise McapDataError(
+                f"{channel.topic}: message encoding '{enc}' cannot be decoded; supported: "
+                + ", ".join(f"{k} ({v})" for k, v in _DECODABLE.items())
+                + ("; convert ROS 1 bags with `rosbags-convert`" if enc == "ros1" else "")
+            )
+        self.kind = "info" if name in CAMERA_INFO_TYPES or name.endswith("CameraCalibration") else "image"
+        self.enc = enc
+        self._proto = None
+        if enc == "protobuf":
+            if schema is None:
+                raise McapDataError(f"{channel.topic}: protobuf channel without a schema cannot be decoded")
+            self._proto = _protobuf_class(schema, channel.topic)
+        elif enc == "cdr" and self.kind == "image" and name not in ROS_IMAGE_TYPES:
+            raise McapDataError(
+                f"{channel.topic}: CDR messages of type '{name}' are not supported; "
+                "depth must be sensor_msgs/msg/Image or foxglove.RawImage"
+            )
+
+    def image(self, data: bytes, what: str) -> _Img:
+        if self.enc == "cdr":
+            return _ros_image(data, what)
+        if self.enc == "json":
+            return _json_image(data, what)
+        return _protobuf_image(self._proto, data, what)
+
+    def info(self, data: bytes, what: str) -> dict[str, Any]:
+        if self.enc == "cdr":
+            return rosmsg.decode_camera_info(data, what=what)
+        return _camera_info((self.enc, self._proto), data, what)
+
+
+def _depth_metres(img: _Img, what: str) -> np.ndarray:
+    scale = DEPTH_ENCODINGS.get(img.encoding)
+    if img.encoding not in rosmsg.BYTES_PER_PIXEL:
+        raise McapDataError(
+            f"{what}: unknown pixel encoding '{img.encoding}'; depth must be 32FC1 (metres), "
+            "16UC1 (millimetres) or 64FC1 (metres)"
+        )
+    arr = rosmsg.image_to_array(img.as_ros(), what=what)  # size checks before trusting pixels
+    if scale is None:
+        raise McapDataError(
+            f"{what}: pixel encoding '{img.encoding}' is not a depth image; expected 32FC1 (metres) or "
+            "16UC1 (millimetres); choose the depth topic with --topic"
+        )
+    if scale == 1.0:
+        return arr.astype(np.float32, copy=False)
+    return arr.astype(np.float32) * np.float32(scale)
+
+
+def _label_mask(img: _Img, what: str) -> np.ndarray:
+    if img.encoding not in LABEL_ENCODINGS:
+        raise McapDataError(
+            f"{what}: label images must be mono8 (0 = background, nonzero = object), got '{img.encoding}'"
+        )
+    arr = rosmsg.image_to_array(img.as_ros(), what=what)
+    return (arr > 0).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------------- topic choice
+
+
+def _tokens(topic: str) -> list[str]:
+    return [t for t in re.split(r"[/_\-.]+", topic.lower()) if t]
+
+
+def _namespace(topic: str) -> str:
+    return topic.rsplit("/", 1)[0]
+
+
+def _list(items: list[str], limit: int = 12) -> str:
+    if len(items) <= limit:
+        return ", ".join(items)
+    return ", ".join(items[:limit]) + f", ... ({len(items) - limit} more)"
+
+
+def _pick_depth(topics: dict[str, _TopicInfo], path: Path, damage: str | None) -> tuple[str, str]:
+    images = [t for t in topics.values() if t.kind == "image"]
+    cands = [
+        t for t in images
+        if t.first_encoding in AUTO_DEPTH_ENCODINGS and not (_NOT_DEPTH_TOKENS & set(_tokens(t.topic)))
+    ]
+    if len(cands) > 1:
+        named = [t for t in cands if "depth" in t.topic.lower()]
+        if len(named) == 1:
+            return named[0].topic, f"only depth-named {named[0].first_encoding} image topic among {len(cands)}"
+        raise McapDataError(
+            f"{path}: several depth image topics: {_list([t.describe() for t in cands])}; choose one with --topic"
+        )
+    if cands:
+        t = cands[0]
+        return t.topic, f"the only {t.first_encoding} depth image topic"
+    where = f" before the damage ({damage})" if damage else ""
+    if images:
+        raise McapDataError(
+            f"{path}: no depth image topic (32FC1 metres or 16UC1 millimetres){where}; image topics: "
+            f"{_list([t.describe() for t in images])}; choose one with --topic if it holds depth"
+        )
+    if not topics:
+        raise McapDataError(f"{path}: the recording holds no messages{where}")
+    bad = sorted({t.message_encoding for t in topics.values() if t.message_encoding not in _DECODABLE})
+    if bad and all(t.message_encoding not in _DECODABLE for t in topics.values()):
+        raise McapDataError(
+            f"{path}: message encoding {', '.join(repr(b) for b in bad)} cannot be decoded (supported: "
+            f"{', '.join(_DECODABLE)}) and no topic holds depth images; topics: "
+            f"{_list(sorted(t.describe() for t in topics.values()))}"
+        )
+    raise McapDataError(
+        f"{path}: no depth images (sensor_msgs/msg/Image or foxglove.RawImage){where}; topics: "
+        f"{_list(sorted(t.describe() for t in topics.values()))}"
+    )
+
+
+def _pick_labels(topics: dict[str, _TopicInfo], depth: str) -> str | None:
+    cands = [
+        t for t in topics.values()
+        if t.kind == "image" and t.topic != depth and {"label", "labels"} & set(_tokens(t.topic))
+        and (t.first_encoding is None or t.first_encoding in LABEL_ENCODINGS)
+    ]
+    if len(cands) > 1:
+        cands = [t for t in cands if _namespace(t.topic) == _namespace(depth)]
+    return cands[0].topic if len(cands) == 1 else None
+
+
+def _pick_info(topics: dict[str, _TopicInfo], depth: str) -> str | None:
+    cands = [t for t in topics.values() if t.kind == "info"]
+    if len(cands) > 1:
+        cands = [t for t in cands if _namespace(t.topic) == _namespace(depth)]
+    return cands[0].topic if len(cands) == 1 else None
+
+
+def _check_topic(topics: dict[str, _TopicInfo], topic: str, role: str, path: Path, flag: str) -> None:
+    info = topics.get(topic)
+    if info is None:
+        images = [t.describe() for t in topics.values() if t.kind == "image"]
+        raise McapDataError(
+            f"{path}: no {role} topic '{topic}'; image topics: {_list(images) if images else 'none'}; "
+            f"check {flag}"
+        )
+    if info.kind != "image":
+        raise McapDataError(
+            f"{path}: {role} topic {topic} carries '{info.schema_name}', not sensor_msgs/msg/Image or "
+            "foxglove.RawImage"
+        )
+    if info.message_encoding not in _DECODABLE:
+        raise McapDataError(
+            f"{path}: {topic}: message encoding '{info.message_encoding}' cannot be decoded; supported: "
+            + ", ".join(_DECODABLE)
+        )
+
+
+# ---------------------------------------------------------------------------- pairing
+
+
+class _Pairer:
+    """Attach labels to depth frames by timestamp, in order, holding at most ``window`` of each."""
+
+    def __init__(self, with_labels: bool, tolerance_ns: int, window: int) -> None:
+        self.with_labels = with_labels
+        self.tol = tolerance_ns
+        self.window = window
+        self.frames: deque[Frame] = deque()
+        self.labels: deque[tuple[int, np.ndarray]] = deque()
+        self.last_label_key: int | None = None
+
+    @staticmethod
+    def _key(fr: Frame) -> int:
+        return fr.extra["match_ns"]
+
+    def add_depth(self, fr: Frame) -> None:
+        if self.with_labels:
+            k = self._key(fr)
+            for i, (lk, lab) in enumerate(self.labels):
+                if abs(lk - k) <= self.tol:
+                    fr.label = lab
+                    del self.labels[i]
+                    break
+        self.frames.append(fr)
+
+    def add_label(self, key: int, lab: np.ndarray) -> None:
+        self.last_label_key = key if self.last_label_key is None else max(self.last_label_key, key)
+        for fr in self.frames:
+            if fr.label is None and abs(self._key(fr) - key) <= self.tol:
+                fr.label = lab
+                return
+        self.labels.append((key, lab))
+        while len(self.labels) > self.window:
+            self.labels.popleft()
+
+    def ready(self) -> Iterator[Frame]:
+        while self.frames:
+            head = self.frames[0]
+            if (
+                not self.with_labels
+                or head.label is not None
+                or len(self.frames) > self.window
+                or (self.last_label_key is not None and self.last_label_key > self._key(head) + self.tol)
+            ):
+                yield self.frames.popleft()
+            else:
+                return
+
+    def flush(self) -> Iterator[Frame]:
+        while self.frames:
+            yield self.frames.popleft()
+
+
+# ---------------------------------------------------------------------------- the stream
+
+
+class DepthStream:
+    """Depth frames of one recording, re-iterable, in file order.
+
+    Attributes set at open: ``depth_topic`` (and ``depth_reason``: why it was chosen),
+    ``labels_topic`` (None without labels), ``info_topic``, ``camera_info`` (latest CameraInfo
+    fields seen, or None), ``frame_count`` (from the summary, None when unknown), ``profile``.
+    ``message_hook`` (set by a writer) sees every message of the file in order during iteration.
+    After an iteration: ``frames_read`` and ``damage`` (None, or the message of the error raised).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        size: int,
+        topics: dict[str, _TopicInfo],
+        depth_topic: str,
+        depth_reason: str,
+        labels_topic: str | None,
+        info_topic: str | None,
+        camera_info: dict[str, Any] | None,
+        frame_count: int | None,
+        profile: str,
+        tolerance_ns: int,
+        window: int,
+    ) -> None:
+        self.path = path
+        self.size = size
+        self.topics = topics
+        self.depth_topic = depth_topic
+        self.depth_reason = depth_reason
+        self.labels_topic = labels_topic
+        self.info_topic = info_topic
+        self.camera_info = camera_info
+        self.frame_count = frame_count
+        self.profile = profile
+        self.tolerance_ns = tolerance_ns
+        self.window = window
+        self.message_hook: MessageHook | None = None
+        self.frames_read = 0
+        self.damage: str | None = None
+        # schemas/channels from an intact summary, for files that define channels only there
+        self._summary_records: tuple[dict[int, Schema], dict[int, Channel]] = ({}, {})
+
+    @property
+    def depth_encoding(self) -> str | None:
+        return self.topics[self.depth_topic].first_encoding
+
+    def __repr__(self) -> str:
+        return f"DepthStream({str(self.path)!r}, depth_topic={self.depth_topic!r}, labels_topic={self.labels_topic!r})"
+
+    def __iter__(self) -> Iterator[Frame]:
+        self.frames_read = 0
+        self.damage = None
+        pairer = _Pairer(self.labels_topic is not None, self.tolerance_ns, self.window)
+        decoders: dict[int, _ChannelDecoder] = {}
+        wanted = {self.depth_topic, self.labels_topic, self.info_topic} - {None}
+        hook = self.message_hook
+        n_depth = 0
+        name = self.path.name
+        try:
+            try:
+                schemas, channels = (dict(d) for d in self._summary_records)
+                for schema, channel, msg in _walk(self.path, self.size, schemas, channels):
+                    if hook is not None:
+                        hook(schema, channel, msg)
+                    topic = channel.topic
+                    if topic not in wanted:
+                        continue
+                    dec = decoders.get(channel.id)
+                    if dec is None:
+                        dec = decoders[channel.id] = _ChannelDecoder(schema, channel)
+                    if topic == self.depth_topic:
+                        what = f"{name} {topic} message {n_depth} (log time {msg.log_time} ns)"
+                        img = dec.image(msg.data, what)
+                        depth = _depth_metres(img, what)
+                        match = img.stamp_ns if img.stamp_ns > 0 else msg.log_time
+                        pairer.add_depth(
+                            Frame(
+                                depth=depth, stamp_ns=msg.log_time, info=self.camera_info, topic=topic,
+                                extra={
+                                    "index": n_depth, "header_stamp_ns": img.stamp_ns, "match_ns": match,
+                                    "frame_id": img.frame_id, "encoding": img.encoding,
+                                    "publish_time": msg.publish_time, "sequence": msg.sequence,
+                                },
+                            )
+                        )
+                        n_depth += 1
+                    elif topic == self.labels_topic:
+                        what = f"{name} {topic} message at log time {msg.log_time} ns"
+                        img = dec.image(msg.data, what)
+                        pairer.add_label(img.stamp_ns if img.stamp_ns > 0 else msg.log_time, _label_mask(img, what))
+                    else:
+                        self.camera_info = dec.info(msg.data, f"{name} {topic}")
+                    for fr in pairer.ready():
+                        self.frames_read += 1
+                        yield fr
+            except _Damage as d:
+                raise McapDataError(
+                    f"{self.path}: damaged at byte {d.offset} of {self.size}: {d.what}; "
+                    f"{n_depth} depth frames were read before it"
+                ) from None
+        except McapDataError as exc:
+            self.damage = str(exc)
+            for fr in pairer.flush():
+                self.frames_read += 1
+                yield fr
+            raise
+        for fr in pairer.flush():
+            self.frames_read += 1
+            yield fr
+        if n_depth == 0:
+            raise McapDataError(f"{self.path}: topic {self.depth_topic} has no messages; nothing to replay")
+
+
+def _check_file(path: Path) -> int:
+    if not path.exists():
+        raise McapDataError(f"{path}: no such file")
+    if path.is_dir():
+        raise McapDataError(f"{path}: is a directory; pass one .mcap recording")
+    size = path.stat().st_size
+    if size == 0:
+        raise McapDataError(f"{path}: empty file (0 bytes), not an MCAP recording")
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(MAGIC_SIZE)
+    except PermissionError:
+        raise McapDataError(f"{path}: permission denied") from None
+    if magic != MCAP_MAGIC:
+        if len(magic) < MAGIC_SIZE and MCAP_MAGIC.startswith(magic):
+            raise McapDataError(f"{path}: only {size} bytes: truncated inside the MCAP magic")
+        raise McapDataError(
+            f"{path}: not an MCAP file (starts with {magic[:8]!r}); ROS 2 bags must be recorded with "
+            "the mcap storage plugin (`ros2 bag record -s mcap`)"
+        )
+    return size
+
+
+def _read_summary(path: Path):
+    """(channels, schemas, message counts per channel or None); None when the summary is unusable."""
+    from mcap.reader import SeekingReader
+
+    try:
+        with open(path, "rb") as fh:
+            summary = SeekingReader(fh, record_size_limit=os.path.getsize(path)).get_summary()
+    except Exception:  # missing/corrupt footer: the walk finds the channels instead
+        return None
+    if summary is None:
+        return None
+    counts = summary.statistics.channel_message_counts if summary.statistics else None
+    return summary.channels, summary.schemas, counts
+
+
+def _peek_image(schema: Schema | None, channel: Channel, msg: Message, info: _TopicInfo) -> None:
+    try:
+        img = _ChannelDecoder(schema, channel).image(msg.data, channel.topic)
+        info.first_encoding = img.encoding
+        info.first_size = (img.height, img.width)
+    except (McapDataError, struct.error) as exc:
+        info.peek_error = str(exc)
+
+
+def open_depth_stream(
+    path: str | Path,
+    topic: str | None = None,
+    labels_topic: str | None = None,
+    *,
+    tolerance_ns: int = DEFAULT_TOLERANCE_NS,
+    window: int = DEFAULT_WINDOW,
+    peek_bytes: int = PEEK_BYTES,
+) -> DepthStream:
+    """Open ``path`` and decide which topics hold depth, labels and camera info.
+
+    ``topic`` / ``labels_topic`` override the automatic choice (``labels_topic=""`` disables
+    labels). Raises `McapDataError` (one line) when the file is not a readable recording or holds
+    no usable depth topic; damage *after* the first depth frame is reported during iteration.
+    """
+    p = Path(path)
+    size = _check_file(p)
+    summ = _read_summary(p)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    counts: dict[int, int] | None = None
+    if summ is not None:
+        channels, schemas, counts = dict(summ[0]), dict(summ[1]), summ[2]
+    topics: dict[str, _TopicInfo] = {}
+
+    def note(ch: Channel) -> _TopicInfo:
+        t = topics.get(ch.topic)
+        if t is None:
+            s = schemas.get(ch.schema_id) if ch.schema_id else None
+            t = topics[ch.topic] = _TopicInfo(
+                ch.topic, s.name if s else "", s.encoding if s else "", ch.message_encoding
+            )
+        if ch.id not in t.channel_ids:
+            t.channel_ids.append(ch.id)
+        return t
+
+    def has_messages(t: _TopicInfo) -> bool:
+        return counts is None or any(counts.get(c, 0) > 0 for c in t.channel_ids)
+
+    for ch in channels.values():
+        note(ch)
+    headers: list[Header] = []
+    damage: str | None = None
+    infos: dict[str, dict[str, Any]] = {}
+    pos = [0]
+    try:
+        for schema, channel, msg in _walk(p, size, schemas, channels, headers, pos):
+            t = note(channel)
+            if t.kind == "image" and t.first_encoding is None and t.peek_error is None:
+                _peek_image(schema, channel, msg, t)
+            elif t.kind == "info" and channel.topic not in infos:
+                try:
+                    infos[channel.topic] = _ChannelDecoder(schema, channel).info(msg.data, channel.topic)
+                except (McapDataError, struct.error, IndexError):
+                    pass
+            pending = [x for x in topics.values() if x.kind == "image" and x.first_encoding is None
+                       and x.peek_error is None and has_messages(x)]
+            if summ is not None and not pending:
+                break
+            if pos[0] > peek_bytes:
+                break
+    except _Damage as d:
+        damage = f"byte {d.offset}: {d.what}"
+    if topic:
+        _check_topic(topics, topic, "depth", p, "--topic")
+        depth, reason = topic, "chosen with --topic"
+    else:
+        depth, reason = _pick_depth(topics, p, damage)
+    if labels_topic:
+        _check_topic(topics, labels_topic, "labels", p, "--labels-topic")
+        if labels_topic == depth:
+            raise McapDataError(f"{p}: --labels-topic {labels_topic} is the depth topic; choose the label topic")
+        labels: str | None = labels_topic
+    elif labels_topic == "":
+        labels = None
+    else:
+        labels = _pick_labels(topics, depth)
+    info_topic = _pick_info(topics, depth)
+    camera_info = infos.get(info_topic) if info_topic else None
+    frame_count = None
+    if counts is not None:
+        frame_count = sum(counts.get(c, 0) for c in topics[depth].channel_ids)
+        if frame_count == 0:
+            raise McapDataError(f"{p}: topic {depth} has no messages; nothing to replay")
+    profile = headers[0].profile if headers else ""
+    stream = DepthStream(
+        p, size, topics, depth, reason, labels, info_topic, camera_info, frame_count, profile,
+        int(tolerance_ns), int(window),
+    )
+    if summ is not None:
+        stream._summary_records = (dict(summ[1]), dict(summ[0]))
+    return stream
