@@ -60,7 +60,7 @@ def test_sheet_grid_and_label_overlay(cs, tmp_path):
     plain = cs.colorize_depth(d)
     assert (first[20, 200] == plain[20, 200]).all()  # floor: the plain colour map
     inside = first[70, 90].astype(int)
-    assert inside[2] > plain[70, 90, 2] + 60  # object: tinted red (BGR)
+    assert inside[2] > int(plain[70, 90, 2]) + 60  # object: tinted red (BGR)
     # only the tiles asked for: the third slot of the second row stays background
     assert (img[gap + tile_h + gap + 50, gap + tile_w + gap + 50] == 16).all()
 
