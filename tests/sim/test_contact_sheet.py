@@ -59,8 +59,8 @@ def test_sheet_grid_and_label_overlay(cs, tmp_path):
     d[:5, :5] = 0.0
     plain = cs.colorize_depth(d)
     assert (first[20, 200] == plain[20, 200]).all()  # floor: the plain colour map
-    inside = first[70, 90].astype(int)
-    assert inside[2] > int(plain[70, 90, 2]) + 60  # object: tinted red (BGR)
+    tinted = (0.6 * plain[70, 90] + 0.4 * np.array([40, 40, 255])).astype(np.uint8)
+    assert (first[70, 90] == tinted).all() and not (tinted == plain[70, 90]).all()  # object: red tint
     # only the tiles asked for: the third slot of the second row stays background
     assert (img[gap + tile_h + gap + 50, gap + tile_w + gap + 50] == 16).all()
 
