@@ -304,7 +304,7 @@ def replay(
                         )
                     )
                 n += 1
-        except McapDataError as exc:
+        except DataError as exc:  # damaged file, malformed frame, frame the model cannot take
             error = str(exc)
         seconds = time.perf_counter() - t_start
         if writer is not None:

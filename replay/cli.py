@@ -1,0 +1,135 @@
+"""``depthseg-replay``: run the ONNX model over a recorded or simulated MCAP, as the robot would.
+
+Thin wrapper: `replay.reader.open_depth_stream` finds the topics, `edge.infer.Segmenter` runs the
+model, `replay.replay.replay` loops, scores and writes. Informational lines (which topic was
+chosen, camera intrinsics) go to stderr; the summary (or ``--json``) goes to stdout. Edge path:
+no torch import here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from edge.cliutil import print_json, progress, run
+from edge.errors import ConfigError, ModelError
+
+PROG = "depthseg-replay"
+
+DESCRIPTION = """\
+Replay depth frames from an MCAP recording through the segmentation model and report what it
+does: frames/s, latency percentiles, the share of unknown (invalid-depth) pixels and, when the
+recording has labels, IoU, precision, recall and pixel accuracy over valid pixels.
+
+Reads ROS 2 sensor_msgs/msg/Image (32FC1 metres with 0 or NaN invalid; 16UC1 millimetres),
+foxglove RawImage (protobuf or JSON) and depthseg-sim recordings. The depth topic is found
+automatically (depth encodings and names); --topic overrides it. CameraInfo is used when present.
+Frames of any size work: they are zero-padded to multiples of 32 for the network and cropped back.
+"""
+
+EPILOG = """\
+output (--out): the input's messages copied through, plus /depthseg/mask (mono8: 0 background,
+1 object, 255 unknown) and /depthseg/overlay (rgb8: grey background, orange objects, magenta
+unknown), on the depth frames' timestamps; open it in Foxglove.
+A damaged recording is replayed up to the damage; the output is still written, then the error
+is reported and the exit code is 2.
+
+examples:
+  depthseg-replay rec.mcap
+  depthseg-replay rec.mcap --out rec_seg.mcap --rate 1.0
+  depthseg-replay rec.mcap --topic /camera/depth/image_raw --labels-topic "" --json
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog=PROG, description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("recording", type=Path, help="one .mcap file (ROS 2 bag, Foxglove recording or depthseg-sim output)")
+    p.add_argument("--model", type=Path, default=None,
+                   help="exported .onnx model (default: the shipped edge/models/default.onnx)")
+    p.add_argument("--topic", default=None, help="depth image topic (default: detected; the error lists candidates)")
+    p.add_argument("--labels-topic", default=None,
+                   help="mono8 label topic, nonzero = object (default: a '*labels*' image topic if there is one; "
+                   "'' disables scoring)")
+    p.add_argument("--out", type=Path, default=None, help="write an MCAP with the input plus mask and overlay topics")
+    p.add_argument("--rate", type=float, default=None,
+                   help="pace playback to the recording's timestamps (1.0 = real time; default: as fast as possible)")
+    p.add_argument("--threshold", type=float, default=None,
+                   help="object probability threshold (default: the one stored in the model)")
+    p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object (frames, fps, p50_ms, ... and iou, precision, recall, "
+                   "pixel_accuracy with labels)")
+    return p
+
+
+def _note(msg: str) -> None:
+    print(f"{PROG}: {msg}", file=sys.stderr)
+
+
+def _report(summary, as_json: bool) -> None:
+    if as_json:
+        print_json(summary.to_dict())
+    else:
+        for line in summary.lines():
+            print(line)
+
+
+def _body(args: argparse.Namespace) -> int:
+    from edge.infer import Segmenter
+    from replay.reader import open_depth_stream
+    from replay.replay import ReplayDataError, replay
+
+    if args.threads < 1:
+        raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+    if args.model is not None and args.model.suffix.lower() in (".pt", ".pth"):
+        raise ModelError(
+            f"{args.model}: replay runs exported ONNX models; export the checkpoint with depthseg-export first"
+        )
+    if args.out is not None and args.out.resolve() == args.recording.resolve():
+        raise ConfigError(f"--out {args.out} is the input recording; choose another file name")
+    stream = open_depth_stream(args.recording, args.topic, args.labels_topic)
+    seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold)
+    _note(f"depth topic {stream.depth_topic} ({stream.depth_reason})")
+    _note(f"labels: {stream.labels_topic or 'none (no scores)'}")
+    s = seg.meta.sensor
+    if stream.camera_info:
+        ci = stream.camera_info
+        _note(
+            f"camera_info {stream.info_topic}: {ci['width']}x{ci['height']} fx {ci['fx']:.1f} fy {ci['fy']:.1f} "
+            f"(model trained for {s.width}x{s.height} fx {s.fx:.1f} fy {s.fy:.1f})"
+        )
+    sizes_noted: set[tuple[int, int]] = set()
+    bar = progress(total=stream.frame_count, desc="replay", unit="frame")
+
+    def on_frame(r) -> None:
+        hw = r.mask.shape
+        if hw != (s.height, s.width) and hw not in sizes_noted:
+            sizes_noted.add(hw)
+            bar.write(
+                f"{PROG}: frames are {hw[1]}x{hw[0]}, the model was trained on {s.width}x{s.height}; "
+                "padded to multiples of 32, scores may differ", file=sys.stderr,
+            )
+        bar.update(1)
+
+    try:
+        summary = replay(stream, seg, out=args.out, rate=args.rate, on_frame=on_frame)
+    except ReplayDataError as exc:
+        bar.close()
+        _report(exc.summary, args.json)
+        raise
+    finally:
+        bar.close()
+    _report(summary, args.json)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return run(PROG, lambda: _body(args))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
