@@ -5,11 +5,13 @@ capture at 0.5 and acceptable at 0.9999, found by hand; here it is found by a sw
 
 How, in constant memory (never a list of pixels or frames):
 - Every candidate threshold is an edge of one fixed, fine grid over the logits: ``N_EDGES``
-  edges spaced evenly in asinh(logit / ``GRID_SCALE``) over [-30, 30], i.e. ~1e-4 logit apart
-  around 0 and 0.17 % of the logit apart in the tails (logit 9.21 = probability 0.9999 is
-  resolved to +-0.016 logit, +-1.6e-6 in probability). Logit 0 (probability 0.5) and the
+  edges spaced evenly in asinh(logit / ``GRID_SCALE``) over [-16, 16], i.e. 8e-5 logit apart
+  around 0 and 0.16 % of the logit apart in the tails (logit 9.21 = probability 0.9999 is
+  resolved to +-0.015 logit, +-1.5e-6 in probability). Logit 0 (probability 0.5) and the
   model's stored threshold are exact edges, so "before" numbers are exact, not interpolated.
-  Logits outside [-30, 30] fall into an under/overflow bin.
+  Logits outside [-16, 16] fall into an under/overflow bin (counted, never lost). Why 16: the
+  edge path compares float32 probabilities with the threshold (`edge.infer.Segmenter`), and
+  above sigmoid(16) = 1 - 1.1e-7 float32 can no longer tell a probability from 1.
 - Per frame, the valid pixels' logits are binned once per class (object / background); suffix
   sums give TP, FP, FN, TN at *every* edge, from which the frame's IoU, precision, recall and
   pixel accuracy at every edge follow, with the 0/0 conventions of `edge.metrics`. Only their
@@ -72,9 +74,9 @@ __all__ = [
 ]
 
 N_EDGES = 8193  # odd: logit 0 is the middle edge
-LOGIT_LIMIT = 30.0  # sigmoid(30) = 1 - 9.4e-14: beyond it float64 probabilities run out
+LOGIT_LIMIT = 16.0  # sigmoid(16) = 1 - 1.1e-7: about the last probability float32 tells from 1
 GRID_SCALE = 0.05  # logits ~ this size get an evenly spaced grid; larger ones a relative one
-OBJECTIVE_FORMS = "iou, f1, fBETA (e.g. f0.5, f2), precision>=P or recall>=R with P, R in (0, 1]"
+OBJECTIVE_FORMS = "iou, f1, fBETA (e.g. f0.5, f2), precision>=P, recall>=R (P, R fractions, e.g. 0.98)"
 
 _TIE_TOL = 1e-12
 
@@ -133,6 +135,12 @@ class Objective:
     def fscore_key(self) -> str:
         return "f1" if self.beta == 1.0 else f"f{self.beta:g}"
 
+    def check_attainable(self) -> None:
+        """`ThresholdError` now (before any frame is run) for a target no threshold can ever meet."""
+        if self.constrained and self.target > 1.0:
+            pct = " (targets are fractions: 0.98, not 98)" if self.target > 1.5 else ""
+            raise ThresholdError(f"no threshold can give mean {self.kind} >= {self.target:g}: it is at most 1{pct}")
+
     def describe(self) -> str:
         if self.kind == "iou":
             return "maximise per-frame mean IoU"
@@ -161,11 +169,8 @@ def parse_objective(text: str) -> Objective:
     if m:
         kind = {"p": "precision", "r": "recall"}.get(m.group(1), m.group(1))
         target = float(m.group(2))
-        if not 0.0 < target <= 1.0:
-            raise ConfigError(
-                f"objective '{raw}': the {kind} target must lie in (0, 1] (a fraction, not a percentage); "
-                f"valid forms: {OBJECTIVE_FORMS}"
-            )
+        if not (target > 0.0 and math.isfinite(target)):
+            raise ConfigError(f"objective '{raw}': a {kind} target must be > 0; valid forms: {OBJECTIVE_FORMS}")
         return Objective(kind, target=target, text=f"{kind}>={target:g}")
     raise ConfigError(f"unknown objective '{raw}'; valid forms: {OBJECTIVE_FORMS}")
 
@@ -480,11 +485,13 @@ def tune(
     labels_name: str = "ground truth",
     edges: np.ndarray | None = None,
     wrap: Callable[[Iterator[Frame]], Iterator[Frame]] | None = None,
+    no_labels_hint: str = "",
 ) -> TuneResult:
     """Run ``predictor`` (``.meta``, ``.name``, ``.logits(depth)``) over labelled ``frames`` and choose a threshold.
 
     Frames without labels are counted and skipped (not run through the model) unless
     ``pseudo_labels`` makes labels for every frame. ``limit`` caps the frames used.
+    ``no_labels_hint`` ends the error raised when no frame has a label (e.g. the topics present).
     """
     obj = parse_objective(objective) if isinstance(objective, str) else objective
     if limit is not None and limit < 1:
@@ -521,7 +528,9 @@ def tune(
         if limit is not None and used >= limit:
             break
     if used == 0:
-        raise DataError(f"no labelled frames to tune on ({unlabelled} frames without labels)")
+        raise DataError(
+            f"no labelled frames to tune on ({unlabelled} frames without labels)" + (f"; {no_labels_hint}" if no_labels_hint else "")
+        )
     if tuning.frames == 0:
         raise DataError(
             f"no tuning frames left: {used} labelled frames, {heldout.frames} held out by --split {split:g}; "

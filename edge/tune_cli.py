@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from edge.cliutil import print_json, progress, run
-from edge.frames import TOPIC_CLEAN, TOPIC_DEPTH, TOPIC_LABELS, Frame
+from edge.frames import TOPIC_DEPTH, TOPIC_LABELS, Frame
 from edge.tune import OBJECTIVE_FORMS
 
 PROG = "depthseg-tune"
@@ -56,18 +56,45 @@ parser.add_argument("--limit", type=int, default=None, metavar="N", help="use at
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
 
-def _depth_frames(path: str, depth_topic: str | None) -> tuple[Iterator[Frame], int | None]:
-    """Frames of PATH without requiring labels (pseudo-label mode)."""
-    from edge.eval_cli import _channels, _pick
-    from edge.frames import iter_frames, list_mcap_files
+def open_frames(
+    path: str, depth_topic: str | None, labels_topic: str | None, need_labels: bool = True
+) -> tuple[Iterator[Frame], int | None, list]:
+    """Frames of every recording in PATH (a .mcap file or a directory of them), their count when known,
+    and the `replay.reader.DepthStream` of each file (its chosen topics).
 
-    topics = _channels(list_mcap_files(path))
-    dt = _pick(topics, depth_topic, TOPIC_DEPTH, ("depth",), "depth", "--depth-topic", exclude=(TOPIC_CLEAN,))
-    try:
-        from replay.reader import open_depth_stream  # type: ignore[attr-defined]
-    except ImportError:
-        return iter_frames(path, depth_topic=dt), topics.get(dt) or None
-    return iter(open_depth_stream(path, topic=dt)), topics.get(dt) or None
+    Topics are chosen per file by `replay.reader` (auto-detected unless given). With
+    ``need_labels`` a file without a label topic is refused up front, naming the topics it has.
+    """
+    from edge.errors import DataError
+    from edge.frames import list_mcap_files
+    from replay.reader import open_depth_stream
+
+    streams = []
+    for f in list_mcap_files(path):
+        s = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic if need_labels else "")
+        if need_labels and s.labels_topic is None:
+            raise DataError(
+                f"{f}: no label topic found (topics present: {', '.join(sorted(s.topics)) or 'none'}); "
+                "name it with --labels-topic, or tune an unlabelled recording with --pseudo-labels"
+            )
+        streams.append(s)
+    counts = [s.frame_count for s in streams]
+    total = None if any(c is None for c in counts) else sum(counts)  # type: ignore[arg-type]
+
+    def chain() -> Iterator[Frame]:
+        for s in streams:
+            yield from s
+
+    return chain(), total, streams
+
+
+def _no_labels_hint(streams: list) -> str:
+    looked = sorted({s.labels_topic for s in streams if s.labels_topic})
+    present = sorted({t for s in streams for t in s.topics})
+    return (
+        f"label topic {', '.join(looked)} carries no label matching a depth frame; topics present: "
+        f"{', '.join(present) or 'none'}; name the label topic with --labels-topic, or use --pseudo-labels"
+    )
 
 
 def _fmt_point(name: str, p: dict, metric: str) -> str:
@@ -117,13 +144,13 @@ def main(argv: list[str] | None = None) -> int:
 
     def body() -> int:
         from edge.errors import ConfigError
-        from edge.eval_cli import open_frames
         from edge.predict import load_predictor, resolve_model_path
         from edge.threshold_store import store_threshold
         from edge.tune import heldout_assigner, parse_objective, plot_pr_curve, pseudo_labeller, tune
 
         # Check every option before the (slow) pass over the frames.
         objective = parse_objective(args.objective)
+        objective.check_attainable()
         heldout_assigner(args.split, args.seed)
         if args.threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {args.threads}")
@@ -142,22 +169,22 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--plot {args.plot}: directory {Path(args.plot).parent} does not exist")
 
         pseudo = None
-        if args.pseudo_labels:
-            frames, total = _depth_frames(args.data, args.depth_topic)
-        else:
-            frames, total = open_frames(args.data, args.depth_topic, args.labels_topic)
+        frames, total, streams = open_frames(
+            args.data, args.depth_topic, args.labels_topic, need_labels=not args.pseudo_labels
+        )
         predictor = load_predictor(model_path, threads=args.threads)
         if args.pseudo_labels:
             pseudo = pseudo_labeller(args.pseudo_height, seed=args.seed, sensor=predictor.meta.sensor)
             labels = f"pseudo-labels: RANSAC floor plane + {1000 * args.pseudo_height:g} mm height (edge.baseline)"
         else:
-            labels = "ground truth" + (f" ({args.labels_topic})" if args.labels_topic else " labels")
+            label_topics = sorted({s.labels_topic for s in streams if s.labels_topic})
+            labels = f"ground truth ({', '.join(label_topics)})"
         if args.limit is not None and total is not None:
             total = min(total, args.limit)
         with progress(frames, total=total, desc="tune", unit="frame") as bar:
             result = tune(
                 predictor, bar, objective, split=args.split, seed=args.seed, limit=args.limit,
-                pseudo_labels=pseudo, labels_name=labels,
+                pseudo_labels=pseudo, labels_name=labels, no_labels_hint=_no_labels_hint(streams),
             )
         d = result.to_dict()
         policy = result.policy(Path(args.data).name)
