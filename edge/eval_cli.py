@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import struct
 from collections.abc import Iterator
 from pathlib import Path
 
 from edge.cliutil import print_json, progress, run
 from edge.errors import DataError
 from edge.evaluate import FIGURE_PICKS, EvalReport, evaluate, model_label
-from edge.frames import TOPIC_CLEAN, TOPIC_DEPTH, TOPIC_LABELS, Frame, list_mcap_files
+from edge.frames import TOPIC_DEPTH, TOPIC_LABELS, Frame, list_mcap_files
 
 PROG = "depthseg-eval"
 
@@ -46,75 +45,67 @@ parser.add_argument(
 )
 parser.add_argument("--baseline-height", type=float, default=0.008, metavar="M",
                     help="baseline: height above the plane that counts as object, metres (default 0.008)")
-parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: {TOPIC_DEPTH}, else auto-detected)")
-parser.add_argument("--labels-topic", default=None, help=f"label Image topic (default: {TOPIC_LABELS}, else auto-detected)")
+parser.add_argument("--baseline-median", type=int, choices=(0, 3, 5), default=3, metavar="PX",
+                    help="baseline: median filter on the height map, 0 (off), 3 or 5 pixels (default 3)")
+parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: auto-detected, e.g. {TOPIC_DEPTH})")
+parser.add_argument("--labels-topic", default=None, help=f"label Image topic, mono8 nonzero = object (default: auto-detected, e.g. {TOPIC_LABELS})")
 parser.add_argument("--limit", type=int, default=None, metavar="N", help="stop after N labelled frames")
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
 
-def _channels(files: list[Path]) -> dict[str, int]:
-    """Topic -> message count over all files (from the MCAP summaries; a scan when a file has none)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+def _message_counts(path: Path) -> dict[str, int] | None:
+    """Topic -> message count from the MCAP summary; None when the file has no usable summary."""
+    from mcap.reader import SeekingReader
 
-    topics: dict[str, int] = {}
-    for f in files:
-        try:
-            with open(f, "rb") as fh:
-                reader = make_reader(fh)
-                summary = reader.get_summary()
-                if summary is not None and summary.statistics is not None:
-                    counts = summary.statistics.channel_message_counts
-                    for cid, ch in summary.channels.items():
-                        topics[ch.topic] = topics.get(ch.topic, 0) + int(counts.get(cid, 0))
-                    continue
-                for _s, ch, _m in reader.iter_messages():
-                    topics[ch.topic] = topics.get(ch.topic, 0) + 1
-        except (McapError, ValueError, OSError, EOFError, struct.error) as exc:
-            raise DataError(f"{f}: not a readable MCAP file ({type(exc).__name__}: {str(exc)[:120]})") from None
-    # a registered channel without messages (e.g. labels never written) is not data
-    return {t: n for t, n in topics.items() if n > 0}
-
-
-def _pick(topics: dict[str, int], given: str | None, default: str, words: tuple[str, ...], what: str, flag: str,
-          exclude: tuple[str, ...] = ()) -> str:
-    names = sorted(topics)
-    if given is not None:
-        if given not in topics:
-            raise DataError(f"no {what} topic '{given}' in the data; topics present: {', '.join(names) or 'none'}")
-        return given
-    if default in topics:
-        return default
-    cands = [t for t in names if any(w in t.lower() for w in words) and t not in exclude]
-    if len(cands) == 1:
-        return cands[0]
-    hint = f"several candidates ({', '.join(cands)})" if cands else "none found"
-    raise DataError(f"no {what} topic ({hint}); topics present: {', '.join(names) or 'none'}; pass {flag}")
+    try:
+        with open(path, "rb") as fh:
+            summary = SeekingReader(fh).get_summary()
+    except Exception:  # noqa: BLE001 - damaged footer: the reader reports damage while streaming
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    counts: dict[str, int] = {}
+    for cid, ch in summary.channels.items():
+        counts[ch.topic] = counts.get(ch.topic, 0) + int(summary.statistics.channel_message_counts.get(cid, 0))
+    return counts
 
 
 def open_frames(path: str, depth_topic: str | None, labels_topic: str | None) -> tuple[Iterator[Frame], int | None]:
-    """A stream of labelled frames from PATH and the number of depth messages (for the bar)."""
-    try:  # the general reader (foxglove images, damaged files) when it is installed
-        from replay.reader import open_depth_stream  # type: ignore[attr-defined]
-    except ImportError:
-        open_depth_stream = None
-    files = list_mcap_files(path)
-    topics = _channels(files)
-    dt = _pick(topics, depth_topic, TOPIC_DEPTH, ("depth",), "depth", "--depth-topic", exclude=(TOPIC_CLEAN,))
-    lt = _pick(topics, labels_topic, TOPIC_LABELS, ("label", "mask", "seg"), "label", "--labels-topic")
-    if open_depth_stream is not None:
-        return iter(open_depth_stream(path, topic=dt, labels_topic=lt)), topics.get(dt) or None
-    from edge.frames import iter_frames
+    """A stream of frames (with labels) from PATH and the number of depth frames when known.
 
-    return iter_frames(path, depth_topic=dt, labels_topic=lt), topics.get(dt) or None
+    Every file is opened (topics detected, labels checked) before the first frame is scored,
+    so a missing label topic fails at once instead of after minutes of inference.
+    """
+    from replay.reader import open_depth_stream
+
+    streams = []
+    total: int | None = 0
+    for f in list_mcap_files(path):
+        st = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic)
+        counts = _message_counts(f)
+        present = sorted(t for t in st.topics if counts is None or counts.get(t, 0) > 0)
+        if st.labels_topic is None or (counts is not None and counts.get(st.labels_topic, 0) == 0):
+            raise DataError(
+                f"{f}: no labels found for depth topic {st.depth_topic} (looked for a mono8 Image topic named "
+                f"'label(s)'); topics present: {', '.join(present) or 'none'}; name it with --labels-topic"
+            )
+        streams.append(st)
+        total = None if total is None or st.frame_count is None else total + st.frame_count
+
+    def chain() -> Iterator[Frame]:
+        for st in streams:
+            yield from st
+
+    return chain(), total
 
 
 def format_table(report: EvalReport, model_name: str) -> str:
     """The paper's Table III/IV layout: mean per-frame scores in %, plus pooled IoU."""
     rows = [(model_name, report.metrics)]
     if report.baseline is not None:
-        h = (report.baseline_params or {}).get("height_threshold_m", 0.0)
-        rows.append((f"RANSAC plane + {1000 * h:g} mm", report.baseline))
+        bp = report.baseline_params or {}
+        med = f" (median {bp['median_px']})" if bp.get("median_px") else ""
+        rows.append((f"RANSAC plane + {1000 * bp.get('height_threshold_m', 0.0):g} mm{med}", report.baseline))
     w = max(len(r[0]) for r in rows + [("Model", None)])
     head = f"{'Model':<{w}}  {'Pixel acc.':>10}  {'IoU':>7}  {'Precision':>9}  {'Recall':>7}  {'Pooled IoU':>10}"
     lines = [head, "-" * len(head)]
@@ -146,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
 
         if args.threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {args.threads}")
-        base = PlaneBaseline(height_threshold_m=args.baseline_height) if args.baseline else False
+        base = PlaneBaseline(height_threshold_m=args.baseline_height, median_px=args.baseline_median) if args.baseline else False
         frames, total = open_frames(args.data, args.depth_topic, args.labels_topic)
         predictor = load_predictor(args.model, threads=args.threads)
         if args.limit is not None and total is not None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import heapq
 import os
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -256,16 +256,7 @@ def evaluate(
         threshold=float(threshold),
         metrics=acc.summary(),
         baseline=bacc.summary() if bacc is not None else None,
-        baseline_params=(
-            {
-                "height_threshold_m": base.height_threshold_m,
-                "distance_threshold_m": base.distance_threshold_m,
-                "iterations": base.iterations,
-                "seed": base.seed,
-            }
-            if base is not None
-            else None
-        ),
+        baseline_params=asdict(base) if base is not None else None,
         unlabelled=unlabelled,
         figures=figures,
     )

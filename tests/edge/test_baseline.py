@@ -97,8 +97,20 @@ def test_distortion_is_undone():
     assert back_project(depth, kd) == pytest.approx(back_project(depth, k), abs=1e-6)
 
 
+def test_median_removes_isolated_noise_detections():
+    depth, label, k = tilted_scene(noise=0.004, seed=1)  # 8 mm threshold = 2 sigma: ~2 % of the floor
+    floor = ~label.astype(bool)
+    raw = PlaneBaseline(median_px=0).predict(depth, k)
+    smooth = PlaneBaseline(median_px=3).predict(depth, k)
+    assert raw[floor].mean() > 0.01
+    assert smooth[floor].mean() < raw[floor].mean() / 5
+    assert smooth[label.astype(bool)].mean() > 0.95
+
+
 def test_bad_parameters():
     with pytest.raises(ConfigError):
         PlaneBaseline(height_threshold_m=0)
     with pytest.raises(ConfigError):
         PlaneBaseline(iterations=0)
+    with pytest.raises(ConfigError, match="median"):
+        PlaneBaseline(median_px=4)

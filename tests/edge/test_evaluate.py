@@ -222,7 +222,7 @@ def test_cli_no_labels_is_one_line_error(tiny_ckpt, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc != 0
     assert len(err.strip().splitlines()) == 1
-    assert "no label topic" in err and "/pico_flexx/image_depth" in err and "Traceback" not in err
+    assert "no labels found" in err and "/pico_flexx/image_depth" in err and "Traceback" not in err
 
 
 def test_cli_bad_inputs(tiny_ckpt, tmp_path, capsys):
@@ -231,7 +231,42 @@ def test_cli_bad_inputs(tiny_ckpt, tmp_path, capsys):
     (tmp_path / "junk.mcap").write_bytes(b"garbage")
     rc = eval_main(["--model", str(tiny_ckpt), "--data", str(tmp_path / "junk.mcap")])
     err = capsys.readouterr().err
-    assert rc == 2 and "not a readable MCAP" in err and len(err.strip().splitlines()) == 1
+    assert rc == 2 and "not an MCAP file" in err and len(err.strip().splitlines()) == 1
     data = write_frames(tmp_path / "ok.mcap", 1)
     rc = eval_main(["--model", str(tmp_path / "missing.onnx"), "--data", str(data)])
     assert rc == 2 and "no such model file" in capsys.readouterr().err
+
+
+def write_custom(path: Path, depth_topic: str, label_topic: str, n: int = 3) -> Path:
+    """A user's own ROS 2 recording: other topic names, no camera_info."""
+    from mcap.writer import Writer
+
+    from edge import rosmsg
+
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(rosmsg.IMAGE_TYPE, "ros2msg", rosmsg.IMAGE_MSGDEF.encode())
+        dch = w.register_channel(depth_topic, "cdr", sid)
+        lch = w.register_channel(label_topic, "cdr", sid)
+        for i in range(n):
+            d, lab = scene(i)
+            t = (i + 1) * 50_000_000
+            w.add_message(dch, log_time=t, publish_time=t, data=rosmsg.encode_image(t, "cam", d, "32FC1"))
+            w.add_message(lch, log_time=t, publish_time=t, data=rosmsg.encode_image(t, "cam", lab * 255, "mono8"))
+        w.finish()
+    return path
+
+
+def test_cli_users_recording_auto_and_named_topics(tiny_ckpt, tmp_path, capsys):
+    f = write_custom(tmp_path / "rec.mcap", "/camera/depth/image_raw", "/camera/labels")
+    assert eval_main(["--model", str(tiny_ckpt), "--data", str(f), "--json", "--baseline"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 3 and out["baseline"]["iou"] > 0.9
+    g = write_custom(tmp_path / "rec2.mcap", "/camera/depth/image_raw", "/camera/object_mask")
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(g), "--json"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "/camera/object_mask" in err and "--labels-topic" in err
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(g), "--json", "--labels-topic", "/camera/object_mask",
+                    "--depth-topic", "/camera/depth/image_raw"])
+    assert rc == 0 and json.loads(capsys.readouterr().out)["frames"] == 3
