@@ -1,0 +1,246 @@
+"""ONNX Runtime inference on raw depth frames: the engine replay, tune, eval and bench share.
+
+Why this shape:
+- The model file is the single source of truth: `ModelMeta` (channels, padding, threshold,
+  sensor) is read from its ``metadata_props``, so a caller cannot feed a single-channel model
+  three channels or use a threshold the model was not tuned for without saying so.
+- Preprocessing is `edge.preprocess` (the one implementation), so what runs here is what
+  training and evaluation saw. Models exported ``--with-preprocessing`` do it in the graph
+  and take the raw frame; both kinds give the same `Prediction`.
+- Threads are always explicit (intra-op = ``threads``, inter-op 1, sequential): the onnxruntime
+  default follows the host's cores, not the container's, and oversubscribes a small CPU.
+- Per-frame Python work is a few vector operations; the session and its options are built once.
+
+Torch-free: numpy + onnxruntime only. Never import torch here, not even indirectly.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from edge.errors import ConfigError, DataError, ModelError
+from edge.meta import ModelMeta
+from edge.preprocess import preprocess, preprocess_batch
+
+__all__ = [
+    "Prediction",
+    "Segmenter",
+    "session_options",
+    "sigmoid",
+    "UNKNOWN",
+    "INPUT_NAME",
+    "OUTPUT_LOGITS",
+    "OUTPUT_PROB",
+    "OUTPUT_VALID",
+]
+
+UNKNOWN = 255  # mask value of invalid pixels: the sensor gave no range, so no class either
+INPUT_NAME = "depth"
+OUTPUT_LOGITS = "logits"
+OUTPUT_PROB = "probability"
+OUTPUT_VALID = "valid"
+_LOGIT_CLIP = 80.0  # exp(80) is finite in float32; beyond it the sigmoid is 0 or 1 anyway
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """One frame's result. ``mask``: 0 background, 1 object, 255 unknown (invalid pixel)."""
+
+    prob: np.ndarray  # float32 H x W, object probability
+    mask: np.ndarray  # uint8 H x W
+    valid: np.ndarray  # bool H x W
+    timings: dict[str, float]  # ms: pre, infer, post, total
+
+
+def sigmoid(logits: np.ndarray) -> np.ndarray:
+    """Float32 sigmoid without overflow warnings (a new array; the input is not touched)."""
+    p = np.clip(logits, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32, copy=False)
+    np.negative(p, out=p)
+    np.exp(p, out=p)
+    p += 1.0
+    np.reciprocal(p, out=p)
+    return p
+
+
+def session_options(threads: int = 2, spin: bool = True, optimized_model_path: str | None = None):
+    """onnxruntime options for one edge session (see the module docstring for why)."""
+    import onnxruntime as ort
+
+    if int(threads) < 1:
+        raise ConfigError(f"threads must be >= 1, got {threads}")
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = int(threads)
+    so.inter_op_num_threads = 1
+    so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+    so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
+    # Spinning keeps worker threads hot between kernels (lower latency, some idle CPU burn).
+    so.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
+    so.log_severity_level = 3  # errors only: library code does not print
+    if optimized_model_path:
+        so.optimized_model_filepath = str(optimized_model_path)
+    return so
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text[:200] + ("..." if len(text) > 200 else "")
+
+
+class Segmenter:
+    """Object/table segmentation of raw depth frames with an exported ONNX model.
+
+    ``threshold`` overrides the one stored in the model (for experiments); ``spin`` lets
+    onnxruntime's worker threads busy-wait between kernels (lower latency, more CPU burnt).
+    """
+
+    def __init__(
+        self,
+        model_path: str | Path | None = None,
+        threads: int = 2,
+        threshold: float | None = None,
+        providers: Sequence[str] = ("CPUExecutionProvider",),
+        spin: bool = True,
+    ) -> None:
+        import onnxruntime as ort
+
+        from edge.defaults import DEFAULT_ONNX
+
+        path = Path(model_path) if model_path is not None else DEFAULT_ONNX
+        if not path.exists():
+            hint = "export one with depthseg-export" if model_path is not None else "pass --model or rebuild it"
+            raise ModelError(f"{path}: no such model file; {hint}")
+        if path.is_dir():
+            raise ModelError(f"{path}: is a directory, expected an .onnx model file")
+        try:
+            self.session = ort.InferenceSession(
+                str(path), sess_options=session_options(threads, spin), providers=list(providers)
+            )
+        except Exception as exc:  # noqa: BLE001 - onnxruntime raises many types for one cause: a bad file
+            raise ModelError(
+                f"{path}: not a readable ONNX model ({type(exc).__name__}: {_one_line(exc)}); re-export it with depthseg-export"
+            ) from None
+        self.path = path
+        self.threads = int(threads)
+        self.props: dict[str, str] = dict(self.session.get_modelmeta().custom_metadata_map)
+        try:
+            self.meta = ModelMeta.from_onnx_props(self.props)
+        except ModelError as exc:
+            raise ModelError(f"{path}: {exc}") from None
+        self.threshold = self.meta.threshold if threshold is None else float(threshold)
+        if not 0.0 < self.threshold < 1.0:
+            raise ConfigError(f"threshold must lie in (0, 1), got {self.threshold}")
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        if len(inputs) != 1:
+            raise ModelError(f"{path}: expected one input '{INPUT_NAME}', found {[i.name for i in inputs]}")
+        self.input_name = inputs[0].name
+        names = [o.name for o in outputs]
+        self.with_preprocessing = OUTPUT_PROB in names or self.props.get("graph") == "with-preprocessing"
+        self._out_main = OUTPUT_PROB if OUTPUT_PROB in names else names[0]
+        self._out_names = [self._out_main] + ([OUTPUT_VALID] if OUTPUT_VALID in names else [])
+        shape = inputs[0].shape
+        if self.with_preprocessing:
+            if len(shape) != 3:
+                raise ModelError(f"{path}: a --with-preprocessing model takes [N, H, W] raw depth, input is {shape}")
+            self._frame_shape = tuple(d if isinstance(d, int) else None for d in shape[1:])
+        else:
+            if len(shape) != 4:
+                raise ModelError(f"{path}: expected input [N, C, H, W], found {shape}")
+            if isinstance(shape[1], int) and shape[1] != self.meta.in_channels:
+                raise ModelError(
+                    f"{path}: input has {shape[1]} channels but its metadata says {self.meta.in_channels}; re-export it"
+                )
+            self._frame_shape = (None, None)
+        self.precision = self.props.get("precision", "fp32")
+
+    def __repr__(self) -> str:
+        m = self.meta
+        kind = "with-preprocessing" if self.with_preprocessing else "logits"
+        return (
+            f"Segmenter({str(self.path)!r}, {m.encoder} width {m.width:g}, {m.in_channels}ch, {self.precision}, "
+            f"{kind}, threshold {self.threshold:g}, threads {self.threads})"
+        )
+
+    # -- internals -------------------------------------------------------------------------
+    def _check_frame(self, depth: np.ndarray) -> np.ndarray:
+        d = np.asarray(depth)
+        if d.ndim == 3 and d.shape[0] == 1:
+            d = d[0]
+        if d.ndim != 2:
+            raise DataError(f"a depth frame must be 2-D (H x W), got shape {tuple(d.shape)}")
+        fh, fw = self._frame_shape
+        if (fh is not None and d.shape[0] != fh) or (fw is not None and d.shape[1] != fw):
+            raise DataError(
+                f"frame is {d.shape[0]}x{d.shape[1]} but {self.path.name} was exported for {fh}x{fw}; "
+                "export a plain (logits) model for other sizes"
+            )
+        return d
+
+    def _run_raw(self, frames: np.ndarray) -> list[np.ndarray]:
+        """frames float32 [N, H, W] through a --with-preprocessing model -> [prob, (valid)]."""
+        return self.session.run(self._out_names, {self.input_name: frames})
+
+    # -- public API ------------------------------------------------------------------------
+    def logits(self, depth: np.ndarray) -> np.ndarray:
+        """Float32 H x W logits of one frame (for a probability model: the logit of its output)."""
+        d = self._check_frame(depth)
+        h, w = d.shape
+        if self.with_preprocessing:
+            p = self._run_raw(np.ascontiguousarray(d, dtype=np.float32)[None])[0][0]
+            p = np.clip(p, 1e-7, 1.0 - 1e-7)
+            return (np.log(p) - np.log1p(-p)).astype(np.float32)
+        pre = preprocess(d, self.meta.in_channels, self.meta.pad_multiple)
+        out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]
+        return np.ascontiguousarray(out[0, 0, :h, :w])
+
+    def logits_batch(self, frames: Sequence[np.ndarray]) -> np.ndarray:
+        """Float32 [N, H, W] logits of frames of one size, in one session run."""
+        if len(frames) == 0:
+            raise DataError("logits_batch needs at least one frame")
+        ds = [self._check_frame(f) for f in frames]
+        h, w = ds[0].shape
+        if self.with_preprocessing:
+            x = np.stack([np.asarray(d, dtype=np.float32) for d in ds])
+            p = np.clip(self._run_raw(x)[0], 1e-7, 1.0 - 1e-7)
+            return (np.log(p) - np.log1p(-p)).astype(np.float32)
+        x, _valid = preprocess_batch(ds, self.meta.in_channels, self.meta.pad_multiple)
+        out = self.session.run([self._out_main], {self.input_name: x})[0]
+        return np.ascontiguousarray(out[:, 0, :h, :w])
+
+    def predict(self, depth: np.ndarray) -> Prediction:
+        """Raw depth (metres; 0/NaN/negative/inf invalid) in, probability and mask out."""
+        t0 = time.perf_counter()
+        d = self._check_frame(depth)
+        h, w = d.shape
+        if self.with_preprocessing:
+            x = np.ascontiguousarray(d, dtype=np.float32)[None]
+            t1 = time.perf_counter()
+            outs = self._run_raw(x)
+            t2 = time.perf_counter()
+            prob = outs[0][0]
+            if len(outs) > 1:
+                valid = outs[1][0].astype(bool, copy=False)
+            else:
+                with np.errstate(invalid="ignore"):
+                    valid = np.isfinite(d) & (d > 0)
+        else:
+            pre = preprocess(d, self.meta.in_channels, self.meta.pad_multiple)
+            valid = pre.valid
+            t1 = time.perf_counter()
+            out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]
+            t2 = time.perf_counter()
+            prob = sigmoid(out[0, 0, :h, :w])
+        mask = (prob >= self.threshold).view(np.uint8)
+        mask[~valid] = UNKNOWN
+        t3 = time.perf_counter()
+        timings = {
+            "pre": (t1 - t0) * 1e3,
+            "infer": (t2 - t1) * 1e3,
+            "post": (t3 - t2) * 1e3,
+            "total": (t3 - t0) * 1e3,
+        }
+        return Prediction(prob=prob, mask=mask, valid=valid, timings=timings)
