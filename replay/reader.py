@@ -128,6 +128,8 @@ class _TopicInfo:
             bits.append(f"message encoding '{self.message_encoding}'")
         if self.peek_error:
             bits.append("unreadable")
+        elif self.kind == "image" and self.first_encoding is None:
+            bits.append("no messages seen")
         return f"{self.topic} ({', '.join(bits)})"
 
 
@@ -170,7 +172,7 @@ def _describe_exc(exc: BaseException) -> str:
     if isinstance(exc, CRCValidationError):
         return f"checksum mismatch ({exc}): the data is corrupt"
     if name == "RecordLengthLimitExceeded":
-        return f"impossible record length ({exc}): the data is corrupt"
+        return f"record length exceeds the file ({exc}): truncated recording or corrupt data"
     text = str(exc).strip() or name
     return f"unreadable record ({name}: {text[:160]})"
 
