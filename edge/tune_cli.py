@@ -56,45 +56,32 @@ parser.add_argument("--limit", type=int, default=None, metavar="N", help="use at
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
 
-def open_frames(
-    path: str, depth_topic: str | None, labels_topic: str | None, need_labels: bool = True
-) -> tuple[Iterator[Frame], int | None, list]:
-    """Frames of every recording in PATH (a .mcap file or a directory of them), their count when known,
-    and the `replay.reader.DepthStream` of each file (its chosen topics).
+def open_frames(path: str, depth_topic: str | None, labels_topic: str | None, pseudo: bool) -> tuple[Iterator[Frame], int | None]:
+    """Frames of every recording in PATH (a .mcap file or a directory of them) and their count when known.
 
-    Topics are chosen per file by `replay.reader` (auto-detected unless given). With
-    ``need_labels`` a file without a label topic is refused up front, naming the topics it has.
+    Labelled mode shares ``depthseg-eval``'s reader (a file without labels is refused before any
+    inference, naming the topics it has); pseudo-label mode reads depth only.
     """
     from edge.errors import DataError
+    from edge.eval_cli import open_frames as open_labelled
     from edge.frames import list_mcap_files
     from replay.reader import open_depth_stream
 
-    streams = []
-    for f in list_mcap_files(path):
-        s = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic if need_labels else "")
-        if need_labels and s.labels_topic is None:
-            raise DataError(
-                f"{f}: no label topic found (topics present: {', '.join(sorted(s.topics)) or 'none'}); "
-                "name it with --labels-topic, or tune an unlabelled recording with --pseudo-labels"
-            )
-        streams.append(s)
+    if not pseudo:
+        try:
+            return open_labelled(path, depth_topic, labels_topic)
+        except DataError as exc:
+            if "no labels found" not in str(exc):
+                raise
+            raise DataError(f"{exc}, or tune against geometric pseudo-labels with --pseudo-labels") from None
+    streams = [open_depth_stream(f, topic=depth_topic, labels_topic="") for f in list_mcap_files(path)]
     counts = [s.frame_count for s in streams]
-    total = None if any(c is None for c in counts) else sum(counts)  # type: ignore[arg-type]
 
     def chain() -> Iterator[Frame]:
         for s in streams:
             yield from s
 
-    return chain(), total, streams
-
-
-def _no_labels_hint(streams: list) -> str:
-    looked = sorted({s.labels_topic for s in streams if s.labels_topic})
-    present = sorted({t for s in streams for t in s.topics})
-    return (
-        f"label topic {', '.join(looked)} carries no label matching a depth frame; topics present: "
-        f"{', '.join(present) or 'none'}; name the label topic with --labels-topic, or use --pseudo-labels"
-    )
+    return chain(), None if any(c is None for c in counts) else sum(counts)
 
 
 def _fmt_point(name: str, p: dict, metric: str) -> str:
@@ -169,22 +156,20 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--plot {args.plot}: directory {Path(args.plot).parent} does not exist")
 
         pseudo = None
-        frames, total, streams = open_frames(
-            args.data, args.depth_topic, args.labels_topic, need_labels=not args.pseudo_labels
-        )
+        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, args.pseudo_labels)
         predictor = load_predictor(model_path, threads=args.threads)
         if args.pseudo_labels:
             pseudo = pseudo_labeller(args.pseudo_height, seed=args.seed, sensor=predictor.meta.sensor)
             labels = f"pseudo-labels: RANSAC floor plane + {1000 * args.pseudo_height:g} mm height (edge.baseline)"
         else:
-            label_topics = sorted({s.labels_topic for s in streams if s.labels_topic})
-            labels = f"ground truth ({', '.join(label_topics)})"
+            labels = "ground truth labels" + (f" ({args.labels_topic})" if args.labels_topic else "")
         if args.limit is not None and total is not None:
             total = min(total, args.limit)
         with progress(frames, total=total, desc="tune", unit="frame") as bar:
             result = tune(
                 predictor, bar, objective, split=args.split, seed=args.seed, limit=args.limit,
-                pseudo_labels=pseudo, labels_name=labels, no_labels_hint=_no_labels_hint(streams),
+                pseudo_labels=pseudo, labels_name=labels,
+                no_labels_hint="no label matched a depth frame; check --labels-topic, or use --pseudo-labels",
             )
         d = result.to_dict()
         policy = result.policy(Path(args.data).name)

@@ -417,7 +417,7 @@ def test_pseudo_labels_are_reported_and_stored_as_such(capsys, data_dir, tiny_on
 def test_cli_without_labels_fails_with_one_line_naming_topics(capsys, data_dir, tiny_pt):
     rc, out, err = _cli(capsys, "--model", tiny_pt, "--data", data_dir / "unlabelled", "--dry-run")
     assert rc == 2 and out == ""
-    assert err.count("\n") == 1 and "no labelled frames" in err and "/pico_flexx/image_depth" in err
+    assert err.count("\n") == 1 and "no labels found" in err and "topics present: /pico_flexx/camera_info" in err
     assert "--pseudo-labels" in err
 
 
