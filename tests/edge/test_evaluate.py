@@ -270,3 +270,34 @@ def test_cli_users_recording_auto_and_named_topics(tiny_ckpt, tmp_path, capsys):
     rc = eval_main(["--model", str(tiny_ckpt), "--data", str(g), "--json", "--labels-topic", "/camera/object_mask",
                     "--depth-topic", "/camera/depth/image_raw"])
     assert rc == 0 and json.loads(capsys.readouterr().out)["frames"] == 3
+
+
+@pytest.mark.slow
+def test_onnx_model_scores_like_its_checkpoint(tiny_ckpt, data, tmp_path, capsys):
+    """The same weights as .pt (torch) and .onnx (onnxruntime, edge path) give the same table."""
+    onnx_export = pytest.importorskip("export.onnx_export")
+    from edge.checkpoint import load_checkpoint
+
+    model, meta, _ = load_checkpoint(tiny_ckpt)
+    onnx_path = onnx_export.export_onnx(model, meta, tmp_path / "tiny.onnx")
+    a, b = load_predictor(onnx_path, threads=1), load_predictor(tiny_ckpt, threads=1)
+    assert type(a).__name__ == "OnnxPredictor" and a.meta == b.meta
+    depth, _ = scene(2)
+    assert np.abs(a.logits(depth) - b.logits(depth)).max() < 1e-4
+    rc = eval_main(["--model", str(onnx_path), "--data", str(data), "--json", "--threads", "1"])
+    assert rc == 0
+    got = json.loads(capsys.readouterr().out)
+    ref = evaluate(b, iter_frames(data)).to_dict()
+    for k in ("frames", "threshold", "pixel_accuracy", "iou", "precision", "recall", "pooled_iou"):
+        assert got[k] == pytest.approx(ref[k], abs=1e-3), k
+    # evaluating an ONNX model (with the baseline) never loads torch
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from edge.eval_cli import main; "
+        f"rc = main(['--model', {str(onnx_path)!r}, '--data', {str(data)!r}, '--json', '--baseline', '--limit', '1']); "
+        "assert rc == 0; assert 'torch' not in sys.modules, 'torch was imported'"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
