@@ -447,3 +447,30 @@ def test_store_refuses_mismatched_out_and_missing_model(tmp_path, tiny_pt):
         store_threshold(tmp_path / "missing.pt", 0.7, "p")
     with pytest.raises(ModelError, match=r"\(0, 1\)"):
         store_threshold(tiny_pt, 1.0, "p", out=tmp_path / "y.pt")
+
+
+@pytest.mark.slow
+def test_int8_model_is_tuned_on_its_own_outputs_and_keeps_the_threshold(capsys, data_dir, tiny_onnx, tmp_path):
+    from edge.eval_cli import main as eval_main
+    from edge.infer import Segmenter
+    from edge.sampleframes import synthetic_frames
+    from export.quantize import quantize_int8
+
+    q = quantize_int8(tiny_onnx, tmp_path / "tiny-int8.onnx", synthetic_frames(4, 0, sensor=SMALL))
+    assert Segmenter(q, threads=1).precision == "int8"
+    tuned = tmp_path / "tiny-int8-tuned.onnx"
+    data = data_dir / "labelled.mcap"
+    rc, stdout, err = _cli(capsys, "--model", q, "--data", data, "--split", "0", "--out", tuned, "--json")
+    assert rc == 0, err
+    d = json.loads(stdout)
+    assert d["in_sample"] and d["tuning_frames"] == 16
+    seg = Segmenter(tuned, threads=1)
+    assert seg.precision == "int8" and seg.threshold == d["threshold"]
+    assert "int8_check" not in seg.props or seg.props["int8_check"] == Segmenter(q, threads=1).props["int8_check"]
+    # depthseg-eval runs the int8 file at its stored threshold and sees exactly what tune measured
+    assert eval_main(["--model", str(tuned), "--data", str(data), "--json"]) == 0
+    ev = json.loads(capsys.readouterr().out)
+    assert ev["threshold"] == d["threshold"]
+    assert (ev["iou"], ev["precision"], ev["recall"]) == pytest.approx(
+        (d["after"]["iou"], d["after"]["precision"], d["after"]["recall"]), abs=1e-12
+    )
