@@ -84,6 +84,24 @@ def open_frames(path: str, depth_topic: str | None, labels_topic: str | None, ps
     return chain(), None if any(c is None for c in counts) else sum(counts)
 
 
+def _model_paths(model: str | None) -> tuple[Path, list[Path]]:
+    """(model to tune, other files to store the result in).
+
+    Without --model the shipped default is tuned: its ONNX file when present (what replay and
+    bench run), and the threshold is stored in both of its files (checkpoint and ONNX export of
+    the same weights), so every tool agrees.
+    """
+    from edge import defaults
+    from edge.predict import resolve_model_path
+
+    if model is not None:
+        return resolve_model_path(model), []
+    present = [Path(p) for p in (defaults.DEFAULT_ONNX, defaults.DEFAULT_CHECKPOINT) if Path(p).exists()]
+    if not present:
+        return resolve_model_path(None), []  # raises the one-line "default model missing" error
+    return present[0], present[1:]
+
+
 def _fmt_point(name: str, p: dict, metric: str) -> str:
     extra = f"  {metric} {p[metric]:.4f}" if metric not in ("iou", "precision", "recall", "f1") else ""
     return (
@@ -119,6 +137,8 @@ def format_report(d: dict) -> str:
         lines.append(f"note: the target {d['objective']} is met on the tuning frames but not on the held-out frames")
     if d.get("written"):
         lines.append(f"wrote threshold into {d['written']}" + (f" (backup {d['backup']})" if d.get("backup") else ""))
+        for w in d.get("also_written", []):
+            lines.append(f"wrote threshold into {w['written']}" + (f" (backup {w['backup']})" if w.get("backup") else ""))
     elif d.get("dry_run"):
         lines.append("dry run: no model written")
     if d.get("plot"):
@@ -131,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def body() -> int:
         from edge.errors import ConfigError
-        from edge.predict import load_predictor, resolve_model_path
+        from edge.predict import load_predictor
         from edge.threshold_store import store_threshold
         from edge.tune import heldout_assigner, parse_objective, plot_pr_curve, pseudo_labeller, tune
 
@@ -145,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--limit must be >= 1 frame, got {args.limit}")
         if args.pseudo_height <= 0:
             raise ConfigError(f"--pseudo-height must be > 0 m, got {args.pseudo_height}")
-        model_path = resolve_model_path(args.model)
+        model_path, siblings = _model_paths(args.model)
         if args.out is not None and not args.dry_run:
             out = Path(args.out)
             if out.suffix.lower() != model_path.suffix.lower():
@@ -179,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
             written, backup, _ = store_threshold(model_path, result.threshold, policy, out=args.out)
             d["written"] = str(written)
             d["backup"] = str(backup) if backup else None
+            if args.out is None:
+                for other in siblings:  # the shipped default's other file: same weights, same boundary
+                    w2, b2, _ = store_threshold(other, result.threshold, policy)
+                    d.setdefault("also_written", []).append({"written": str(w2), "backup": str(b2) if b2 else None})
         if args.plot is not None:
             d["plot"] = str(plot_pr_curve(result, args.plot))
         if args.json:

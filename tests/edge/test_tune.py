@@ -474,3 +474,28 @@ def test_int8_model_is_tuned_on_its_own_outputs_and_keeps_the_threshold(capsys, 
     assert (ev["iou"], ev["precision"], ev["recall"]) == pytest.approx(
         (d["after"]["iou"], d["after"]["precision"], d["after"]["recall"]), abs=1e-12
     )
+
+
+def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
+    capsys, monkeypatch, data_dir, tiny_pt, tiny_onnx, tmp_path
+):
+    import shutil
+
+    from edge import defaults
+    from edge.threshold_store import read_meta
+
+    pt, onnx_path = tmp_path / "default.pt", tmp_path / "default.onnx"
+    shutil.copy(tiny_pt, pt)
+    shutil.copy(tiny_onnx, onnx_path)
+    monkeypatch.setattr(defaults, "DEFAULT_CHECKPOINT", pt)
+    monkeypatch.setattr(defaults, "DEFAULT_ONNX", onnx_path)
+    rc, stdout, err = _cli(capsys, "--data", data_dir / "labelled.mcap", "--json")
+    assert rc == 0, err
+    d = json.loads(stdout)
+    assert d["model"] == str(onnx_path) and d["written"] == str(onnx_path)
+    assert d["also_written"] == [{"written": str(pt), "backup": str(pt) + ".bak"}]
+    assert read_meta(onnx_path).threshold == read_meta(pt).threshold == d["threshold"]
+    assert read_meta(pt).threshold_policy == d["policy"]
+    from edge.checkpoint import read_checkpoint
+
+    assert ModelMeta.from_dict(read_checkpoint(str(pt) + ".bak")["meta"]).threshold == 0.5
