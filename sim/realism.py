@@ -54,6 +54,7 @@ __all__ = [
     "Realism",
     "corner_masks",
     "depth_discontinuity",
+    "invalid_regions",
     "invalid_stats",
     "floor_mask",
     "floor_noise",
@@ -124,27 +125,41 @@ class InvalidStats:
     corner_area: float  # fraction of the frame that the corner regions cover
 
 
+def invalid_regions(
+    depth: np.ndarray, radius: int = EDGE_RADIUS, step: float = EDGE_STEP_M
+) -> dict[str, np.ndarray]:
+    """Masks of the invalid pixels in each region: ``corner``, ``edge``, ``other`` (disjoint)."""
+    d = np.asarray(depth, dtype=np.float64)
+    invalid = ~valid_mask(d)
+    in_corner = np.zeros(d.shape, bool)
+    for m in corner_masks(d.shape).values():
+        in_corner |= m
+    at_edge = depth_discontinuity(d, radius, step) & ~in_corner
+    return {
+        "corner": invalid & in_corner,
+        "edge": invalid & at_edge,
+        "other": invalid & ~in_corner & ~at_edge,
+    }
+
+
 def invalid_stats(depth: np.ndarray, radius: int = EDGE_RADIUS, step: float = EDGE_STEP_M) -> InvalidStats:
     """Invalid-pixel fraction and its split into corner / object-edge / other pixels."""
     d = np.asarray(depth, dtype=np.float64)
     invalid = ~valid_mask(d)
     corners = corner_masks(d.shape)
-    in_corner = np.zeros(d.shape, bool)
-    for m in corners.values():
-        in_corner |= m
-    at_edge = depth_discontinuity(d, radius, step) & ~in_corner
+    regions = invalid_regions(d, radius, step)
     n = int(invalid.sum())
 
     def share(m: np.ndarray) -> float:
-        return float((invalid & m).sum() / n) if n else 0.0
+        return float(m.sum() / n) if n else 0.0
 
     return InvalidStats(
         fraction=float(invalid.mean()),
-        corner_share=share(in_corner),
-        edge_share=share(at_edge),
-        other_share=share(~in_corner & ~at_edge),
+        corner_share=share(regions["corner"]),
+        edge_share=share(regions["edge"]),
+        other_share=share(regions["other"]),
         corner_fill={k: float(invalid[m].mean()) for k, m in corners.items()},
-        corner_area=float(in_corner.mean()),
+        corner_area=float(sum(m.sum() for m in corners.values()) / d.size),
     )
 
 
