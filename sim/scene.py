@@ -1,0 +1,330 @@
+"""Scene parameters: the paper's Table I as defaults, every range configurable and validated.
+
+Table I of the seed paper (section III.B), converted to metres and radians:
+
+=========================================  ==============================  =====================
+Table I                                    here                            default
+=========================================  ==============================  =====================
+objects per scene: 0 to 20 (text)          ``n_objects``                   (0, 20) inclusive
+object largest dimension [4, 10] cm        ``largest_dim_m``               (0.04, 0.10)
+object x, y position [-7.5, 7.5] cm        ``object_xy_m``                 (-0.075, 0.075)
+object distance to ground 10k cm           ``drop_step_m``                 0.10 (object k at k x)
+object Euler angles [0, pi]                ``euler_rad``                   (0, pi), R = Rz Ry Rx
+camera x, y position 0                     ``camera_xy_m`` (a position)    (0, 0)
+camera distance to ground [20, 40] cm      ``camera_height_m``             (0.20, 0.40)
+camera rotation about z [-pi, pi]          ``camera_yaw_rad``              (-pi, pi)
+camera rotation about x, y [-pi/18, pi/18] ``camera_tilt_rad``             (-pi/18, pi/18)
+=========================================  ==============================  =====================
+
+Beyond Table I: ``min_thickness_m`` (the paper's proposal V.a), the shape mix, the share of
+objects drawn from a user library, and densities. Every random draw takes an
+``np.random.Generator``; there is no global random state.
+
+The small rotation helpers live here because scene sampling, physics and rendering share them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from edge.errors import ConfigError
+from sim.shapes import PROCEDURAL_KINDS, MeshLibrary, Shape, random_procedural
+
+__all__ = [
+    "SceneConfig",
+    "ObjectSpec",
+    "SceneSpec",
+    "sample_scene",
+    "config_from_dict",
+    "check_range",
+    "euler_to_quat",
+    "quat_to_matrix",
+    "camera_rotation",
+]
+
+_PI = math.pi
+DEFAULT_WEIGHTS = {
+    "box": 2.0,
+    "cylinder": 1.5,
+    "sphere": 1.0,
+    "capsule": 1.0,
+    "cone": 1.0,
+    "torus": 0.7,
+    "tube": 1.0,
+    "superquadric": 1.5,
+    "hull": 1.5,
+    "union": 1.5,
+}
+
+
+# --------------------------------------------------------------------------- rotations
+
+
+def euler_to_quat(a: float, b: float, c: float) -> np.ndarray:
+    """(w, x, y, z) of R = Rz(c) Ry(b) Rx(a): Blender's default XYZ Euler, as the paper used."""
+    ha, hb, hc = a / 2, b / 2, c / 2
+    qx = np.array([math.cos(ha), math.sin(ha), 0.0, 0.0])
+    qy = np.array([math.cos(hb), 0.0, math.sin(hb), 0.0])
+    qz = np.array([math.cos(hc), 0.0, 0.0, math.sin(hc)])
+    return _qmul(qz, _qmul(qy, qx))
+
+
+def _qmul(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = p
+    w2, x2, y2, z2 = q
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _rx(t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _ry(t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rz(t: float) -> np.ndarray:
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def camera_rotation(yaw: float, tilt_x: float, tilt_y: float) -> np.ndarray:
+    """World-from-camera rotation of a camera looking straight down, then tilted and yawed.
+
+    Camera axes follow the optical-frame convention (x right, y down, z forward); with no
+    rotation, camera z is world -z and camera y is world -y.
+    """
+    down = np.diag([1.0, -1.0, -1.0])
+    return _rz(yaw) @ _ry(tilt_y) @ _rx(tilt_x) @ down
+
+
+# --------------------------------------------------------------------------- configuration helpers
+
+
+def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: float | None = None) -> tuple:
+    """A (min, max) pair of finite numbers with min <= max, inside optional bounds."""
+    try:
+        lo, hi = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a [min, max] pair of numbers, got {value!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ConfigError(f"{name} must be finite, got [{lo}, {hi}]")
+    if lo > hi:
+        raise ConfigError(f"{name}: min {lo} is above max {hi}; swap them")
+    if lo_bound is not None and lo < lo_bound:
+        raise ConfigError(f"{name}: min {lo} is below the allowed {lo_bound}")
+    if hi_bound is not None and hi > hi_bound:
+        raise ConfigError(f"{name}: max {hi} is above the allowed {hi_bound}")
+    return lo, hi
+
+
+def check_number(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> None:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(x) or (lo is not None and x < lo) or (hi is not None and x > hi):
+        lim = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+        raise ConfigError(f"{name} = {value!r} is outside {lim}")
+
+
+def config_from_dict(cls: type, d: dict[str, Any] | None, section: str) -> Any:
+    """Build a frozen config dataclass from JSON-like data; unknown keys and bad values raise."""
+    if d is None:
+        return cls()
+    if not isinstance(d, dict):
+        raise ConfigError(f"config section '{section}' must be an object, got {type(d).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(d) - set(known))
+    if unknown:
+        raise ConfigError(f"unknown {section} keys {unknown}; valid keys: {sorted(known)}")
+    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
+    try:
+        return cls(**kw)
+    except TypeError as exc:
+        raise ConfigError(f"bad {section} config: {exc}") from None
+
+
+def _to_dict(obj: Any) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(obj).items()}
+
+
+# --------------------------------------------------------------------------- scene configuration
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """What a scene may contain. Defaults: the paper's Table I (see the module docstring)."""
+
+    n_objects: tuple[int, int] = (0, 20)
+    largest_dim_m: tuple[float, float] = (0.04, 0.10)
+    object_xy_m: tuple[float, float] = (-0.075, 0.075)
+    drop_step_m: float = 0.10
+    drop_clearance_m: float = 0.002  # gap under object k's lowest point at release
+    euler_rad: tuple[float, float] = (0.0, _PI)
+    camera_xy_m: tuple[float, float] = (0.0, 0.0)
+    camera_height_m: tuple[float, float] = (0.20, 0.40)
+    camera_yaw_rad: tuple[float, float] = (-_PI, _PI)
+    camera_tilt_rad: tuple[float, float] = (-_PI / 18, _PI / 18)
+    min_thickness_m: float = 0.01  # paper V.a: nothing so flat that it vanishes into the floor
+    shapes: tuple[str, ...] = PROCEDURAL_KINDS
+    shape_weights: tuple[float, ...] = field(default_factory=lambda: tuple(DEFAULT_WEIGHTS[k] for k in PROCEDURAL_KINDS))
+    library_fraction: float = 1.0  # share of objects taken from --objects when a library is given
+    density_kg_m3: tuple[float, float] = (200.0, 1200.0)
+
+    def __post_init__(self) -> None:
+        n = check_range("scene.n_objects", self.n_objects, 0, 200)
+        if any(float(v) != int(v) for v in n):
+            raise ConfigError(f"scene.n_objects must be whole numbers, got {list(self.n_objects)}")
+        check_range("scene.largest_dim_m", self.largest_dim_m, 1e-3, 2.0)
+        check_range("scene.object_xy_m", self.object_xy_m)
+        check_number("scene.drop_step_m", self.drop_step_m, 0.0, 5.0)
+        check_number("scene.drop_clearance_m", self.drop_clearance_m, 0.0, 1.0)
+        check_range("scene.euler_rad", self.euler_rad)
+        try:
+            cx, cy = (float(v) for v in self.camera_xy_m)
+        except (TypeError, ValueError):
+            raise ConfigError(f"scene.camera_xy_m must be an [x, y] position, got {self.camera_xy_m!r}") from None
+        if not (math.isfinite(cx) and math.isfinite(cy)):
+            raise ConfigError(f"scene.camera_xy_m must be finite, got {self.camera_xy_m!r}")
+        check_range("scene.camera_height_m", self.camera_height_m, 0.05, 5.0)
+        check_range("scene.camera_yaw_rad", self.camera_yaw_rad)
+        check_range("scene.camera_tilt_rad", self.camera_tilt_rad, -_PI / 3, _PI / 3)
+        check_number("scene.min_thickness_m", self.min_thickness_m, 0.0)
+        if self.min_thickness_m > self.largest_dim_m[0]:
+            raise ConfigError(
+                f"scene.min_thickness_m {self.min_thickness_m} is above the smallest largest_dim_m "
+                f"{self.largest_dim_m[0]}; lower it"
+            )
+        if not self.shapes:
+            raise ConfigError(f"scene.shapes is empty; choose from {list(PROCEDURAL_KINDS)}")
+        bad = [s for s in self.shapes if s not in PROCEDURAL_KINDS]
+        if bad:
+            raise ConfigError(f"scene.shapes: unknown {bad}; choose from {list(PROCEDURAL_KINDS)}")
+        if len(self.shape_weights) != len(self.shapes):
+            if self.shape_weights == tuple(DEFAULT_WEIGHTS[k] for k in PROCEDURAL_KINDS):
+                object.__setattr__(self, "shape_weights", tuple(DEFAULT_WEIGHTS[k] for k in self.shapes))
+            else:
+                raise ConfigError(
+                    f"scene.shape_weights has {len(self.shape_weights)} entries for {len(self.shapes)} shapes"
+                )
+        w = np.asarray(self.shape_weights, float)
+        if not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+            raise ConfigError(f"scene.shape_weights must be non-negative with a positive sum, got {list(self.shape_weights)}")
+        check_number("scene.library_fraction", self.library_fraction, 0.0, 1.0)
+        check_range("scene.density_kg_m3", self.density_kg_m3, 1.0, 1e5)
+
+    def to_dict(self) -> dict[str, Any]:
+        return _to_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any] | None) -> SceneConfig:
+        return config_from_dict(cls, d, "scene")
+
+
+# --------------------------------------------------------------------------- sampled scenes
+
+
+@dataclass(eq=False)
+class ObjectSpec:
+    """One object at release: its shape, where it starts and how heavy it is."""
+
+    shape: Shape
+    pos: np.ndarray  # (3,) release position of the body frame, metres
+    quat: np.ndarray  # (4,) w x y z
+    density: float
+    euler: tuple[float, float, float]
+
+
+@dataclass(eq=False)
+class SceneSpec:
+    camera_height: float
+    camera_xy: tuple[float, float]
+    yaw: float
+    tilt_x: float
+    tilt_y: float
+    objects: list[ObjectSpec]
+
+    @property
+    def camera_position(self) -> np.ndarray:
+        return np.array([self.camera_xy[0], self.camera_xy[1], self.camera_height])
+
+    @property
+    def camera_rotation(self) -> np.ndarray:
+        return camera_rotation(self.yaw, self.tilt_x, self.tilt_y)
+
+    def to_params(self) -> dict[str, Any]:
+        """JSON-ready description (release poses; physics adds the resting poses)."""
+        return {
+            "camera": {
+                "height_m": round(self.camera_height, 6),
+                "xy_m": [round(v, 6) for v in self.camera_xy],
+                "yaw_rad": round(self.yaw, 6),
+                "tilt_x_rad": round(self.tilt_x, 6),
+                "tilt_y_rad": round(self.tilt_y, 6),
+            },
+            "objects": [
+                {
+                    "shape": o.shape.kind,
+                    **o.shape.params,
+                    "euler_rad": [round(v, 6) for v in o.euler],
+                    "release_pos_m": o.pos.round(6).tolist(),
+                    "density_kg_m3": round(o.density, 3),
+                }
+                for o in self.objects
+            ],
+        }
+
+
+def _u(rng: np.random.Generator, r: tuple[float, float]) -> float:
+    return float(rng.uniform(r[0], r[1])) if r[1] > r[0] else float(r[0])
+
+
+def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrary | None = None) -> SceneSpec:
+    """Draw one scene; objects are stacked in release order k at k * drop_step above the floor."""
+    n = int(rng.integers(int(cfg.n_objects[0]), int(cfg.n_objects[1]) + 1))
+    objects: list[ObjectSpec] = []
+    for k in range(n):
+        largest = _u(rng, cfg.largest_dim_m)
+        if library is not None and len(library) and rng.random() < cfg.library_fraction:
+            shape = library.shape(int(rng.integers(len(library))), largest, cfg.min_thickness_m)
+        else:
+            shape = random_procedural(rng, largest, cfg.min_thickness_m, cfg.shapes, cfg.shape_weights)
+        euler = (_u(rng, cfg.euler_rad), _u(rng, cfg.euler_rad), _u(rng, cfg.euler_rad))
+        q = euler_to_quat(*euler)
+        lowest = float((shape.vertices.astype(np.float64) @ quat_to_matrix(q)[2]).min())
+        z = k * cfg.drop_step_m + cfg.drop_clearance_m - lowest
+        pos = np.array([_u(rng, cfg.object_xy_m), _u(rng, cfg.object_xy_m), z])
+        objects.append(ObjectSpec(shape, pos, q, _u(rng, cfg.density_kg_m3), euler))
+    return SceneSpec(
+        camera_height=_u(rng, cfg.camera_height_m),
+        camera_xy=(float(cfg.camera_xy_m[0]), float(cfg.camera_xy_m[1])),
+        yaw=_u(rng, cfg.camera_yaw_rad),
+        tilt_x=_u(rng, cfg.camera_tilt_rad),
+        tilt_y=_u(rng, cfg.camera_tilt_rad),
+        objects=objects,
+    )

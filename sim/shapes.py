@@ -1,0 +1,516 @@
+"""Objects to drop: procedural meshes and a user's mesh library.
+
+Why procedural shapes: the paper drew from 10,809 downloaded models, which we cannot ship, and
+it had to discard flat categories by hand (section III.B). Generating shapes ourselves means
+nothing has to be downloaded, and every dimension is under control: the paper's own proposal
+V.a, a minimum thickness, is a sampling constraint here instead of a clean-up step.
+
+Each `Shape` carries two geometries in its own body frame:
+- a render mesh (the full surface, a few hundred triangles: open3d's BVH build cost grows with
+  the triangle count, so procedural meshes stay small and library meshes are decimated);
+- collision parts for MuJoCo: native primitives where they exist (box, sphere, cylinder,
+  capsule are far cheaper to collide than meshes) and otherwise a small point set whose convex
+  hull MuJoCo computes (PITFALLS.md: "keep hulls small, render the full mesh").
+
+Library meshes (.obj .stl .off .ply, read with open3d) are rescaled so their largest bounding
+box side equals the sampled largest dimension and stretched along any side thinner than the
+minimum thickness. A file that fails to load is reported once through a callback and skipped;
+library code never prints.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from edge.errors import ConfigError, DataError
+
+__all__ = [
+    "PROCEDURAL_KINDS",
+    "MESH_SUFFIXES",
+    "Part",
+    "Shape",
+    "make_shape",
+    "random_procedural",
+    "fit_mesh",
+    "MeshLibrary",
+]
+
+# The built-in generator. "tube" (a hollow cylinder) stands in for the paper's toilet-paper rolls.
+PROCEDURAL_KINDS = (
+    "box",
+    "cylinder",
+    "sphere",
+    "capsule",
+    "cone",
+    "torus",
+    "tube",
+    "superquadric",
+    "hull",
+    "union",
+)
+MESH_SUFFIXES = (".obj", ".stl", ".off", ".ply")
+
+# Render mesh resolution: enough for 1-2 px accuracy at 20 cm, small enough for a fast BVH.
+_SEG = 24  # segments around an axis of revolution
+_RINGS = 10  # rings along a profile arc / latitude bands
+_HULL_VERTS = 24  # collision hull size for sampled surfaces (torus, superquadric, meshes)
+_LIB_MAX_TRIS = 1500  # library meshes above this are decimated for ray casting
+
+
+@dataclass(frozen=True, eq=False)
+class Part:
+    """One MuJoCo collision geom in the body frame.
+
+    ``size`` follows MuJoCo: box half-sides; sphere (radius,); cylinder and capsule (radius,
+    half-length along z); hull: unused, ``points`` holds the vertices whose hull collides.
+    ``quat`` is (w, x, y, z).
+    """
+
+    kind: str
+    size: tuple[float, ...] = ()
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    points: np.ndarray | None = None
+
+
+@dataclass(eq=False)
+class Shape:
+    """A droppable object: render mesh + collision parts, both in the body frame (metres)."""
+
+    kind: str
+    vertices: np.ndarray  # float32 (N, 3)
+    triangles: np.ndarray  # int32 (M, 3)
+    parts: tuple[Part, ...]
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def extents(self) -> np.ndarray:
+        """Axis-aligned bounding-box sides in the body frame."""
+        return self.vertices.max(0) - self.vertices.min(0)
+
+
+# --------------------------------------------------------------------------- mesh helpers
+
+
+def _quat_from_matrix(r: np.ndarray) -> tuple[float, float, float, float]:
+    """(w, x, y, z) of a rotation matrix (Shepperd's method, numerically safe)."""
+    m = np.asarray(r, dtype=float)
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        q = (0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s)
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = ((m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s)
+    elif m[1, 1] > m[2, 2]:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = ((m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s)
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = ((m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s)
+    n = math.sqrt(sum(c * c for c in q))
+    return tuple(float(c / n) for c in q)  # type: ignore[return-value]
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _grid_triangles(rows: int, cols: int, wrap_rows: bool) -> np.ndarray:
+    """Two triangles per quad of a rows x cols vertex grid that wraps around the columns."""
+    j = np.arange(rows if wrap_rows else rows - 1)
+    i = np.arange(cols)
+    jj, ii = np.meshgrid(j, i, indexing="ij")
+    j1 = (jj + 1) % rows
+    i1 = (ii + 1) % cols
+    a, b, c, d = jj * cols + ii, j1 * cols + ii, j1 * cols + i1, jj * cols + i1
+    return np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+
+
+def _clean(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop zero-area triangles (grid poles) so the BVH holds only real faces."""
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    area2 = np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)
+    t = t[area2 > 1e-12 * max(float(np.ptp(v)), 1e-9) ** 2]
+    return v.astype(np.float32), t.astype(np.int32)
+
+
+def _revolve(profile: Sequence[tuple[float, float]], closed: bool = False, seg: int = _SEG):
+    """Surface of revolution about z from an (r, z) polyline; open profiles end on the axis."""
+    p = np.asarray(profile, dtype=float)
+    th = np.linspace(0.0, 2 * np.pi, seg, endpoint=False)
+    v = np.stack(
+        [p[:, None, 0] * np.cos(th)[None], p[:, None, 0] * np.sin(th)[None], np.broadcast_to(p[:, None, 1], (len(p), seg))],
+        -1,
+    ).reshape(-1, 3)
+    return _clean(v, _grid_triangles(len(p), seg, wrap_rows=closed))
+
+
+def _arc(cr: float, cz: float, radius: float, a0: float, a1: float, n: int) -> list[tuple[float, float]]:
+    a = np.linspace(a0, a1, n)
+    return [(cr + radius * math.cos(t), cz + radius * math.sin(t)) for t in a]
+
+
+def _box_mesh(half: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    h = np.asarray(half, dtype=float)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float) * h
+    tris = np.array(
+        [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+         [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    )
+    return corners.astype(np.float32), tris.astype(np.int32)
+
+
+def _spow(x: np.ndarray, e: float) -> np.ndarray:
+    return np.sign(x) * np.abs(x) ** e
+
+
+def _hull_points(vertices: np.ndarray, limit: int = _HULL_VERTS, rng: np.random.Generator | None = None) -> np.ndarray:
+    """At most ``limit`` hull vertices: farthest-point sampling keeps the extremes of the shape."""
+    from scipy.spatial import ConvexHull
+
+    v = np.asarray(vertices, dtype=np.float64)
+    try:
+        v = v[ConvexHull(v).vertices]
+    except Exception:  # degenerate (flat) input: keep the raw points, MuJoCo reports if unusable
+        pass
+    if len(v) <= limit:
+        return v
+    chosen = [int(np.argmax(np.linalg.norm(v - v.mean(0), axis=1)))]
+    d = np.linalg.norm(v - v[chosen[0]], axis=1)
+    for _ in range(limit - 1):
+        k = int(np.argmax(d))
+        chosen.append(k)
+        d = np.minimum(d, np.linalg.norm(v - v[k], axis=1))
+    return v[chosen]
+
+
+def _centre(vertices: np.ndarray) -> np.ndarray:
+    return (vertices.max(0) + vertices.min(0)) / 2.0
+
+
+# --------------------------------------------------------------------------- sizing
+
+
+def _dims(rng: np.random.Generator, largest: float, thin: float, n: int) -> np.ndarray:
+    """n sizes: the largest equals ``largest``, none below ``thin`` (paper V.a)."""
+    lo = min(thin, largest)
+    d = rng.uniform(lo, largest, size=n)
+    d[rng.integers(n)] = largest
+    return d
+
+
+def fit_mesh(vertices: np.ndarray, largest: float, thin: float) -> tuple[np.ndarray, np.ndarray]:
+    """Scale so the largest bounding-box side is ``largest``; stretch sides under ``thin``.
+
+    Returns the fitted vertices (centred on the box centre) and the per-axis scale applied.
+    Stretching is the paper's V.a proposal: an object so flat that it vanishes into the floor
+    would teach the network to label floor as object.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    v = v - _centre(v)
+    ext = v.max(0) - v.min(0)
+    if not np.all(np.isfinite(ext)) or ext.max() <= 0:
+        raise DataError("mesh has no extent (all vertices coincide)")
+    s = largest / ext.max()
+    scale = np.full(3, s)
+    ext_s = ext * s
+    small = ext_s < thin
+    if np.any(ext[small] <= ext.max() * 1e-9):
+        raise DataError("mesh is flat (zero thickness along one axis); it cannot be given a minimum thickness")
+    scale[small] = thin / ext[small]
+    v = v * scale
+    return v, scale
+
+
+# --------------------------------------------------------------------------- procedural shapes
+
+
+def _box(rng, largest, thin):
+    d = _dims(rng, largest, thin, 3)
+    v, t = _box_mesh(d / 2)
+    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+
+
+def _cylinder(rng, largest, thin):
+    diam, height = _dims(rng, largest, thin, 2)
+    r, h = diam / 2, height / 2
+    v, t = _revolve([(0, -h), (r, -h), (r, h), (0, h)])
+    return v, t, (Part("cylinder", (r, h)),), {"diameter_m": round(diam, 5), "height_m": round(height, 5)}
+
+
+def _sphere(rng, largest, thin):
+    r = largest / 2
+    v, t = _revolve(_arc(0, 0, r, -np.pi / 2, np.pi / 2, _RINGS + 1), seg=_SEG)
+    return v, t, (Part("sphere", (r,)),), {"diameter_m": round(largest, 5)}
+
+
+def _capsule(rng, largest, thin):
+    diam = rng.uniform(min(thin, largest), largest * 0.8)
+    r = diam / 2
+    h = max(largest / 2 - r, 1e-4)
+    prof = _arc(0, -h, r, -np.pi / 2, 0, _RINGS // 2 + 1) + _arc(0, h, r, 0, np.pi / 2, _RINGS // 2 + 1)
+    v, t = _revolve(prof)
+    return v, t, (Part("capsule", (r, h)),), {"diameter_m": round(diam, 5), "length_m": round(largest, 5)}
+
+
+def _cone(rng, largest, thin):
+    diam, height = _dims(rng, largest, thin, 2)
+    r, h = diam / 2, height / 2
+    top = r * rng.uniform(0.0, 0.6)  # 0: a sharp cone, else a frustum
+    v, t = _revolve([(0, -h), (r, -h), (top, h), (0, h)])
+    return v, t, (Part("hull", points=_hull_points(v)),), {
+        "diameter_m": round(diam, 5),
+        "height_m": round(height, 5),
+        "top_ratio": round(top / r, 4),
+    }
+
+
+def _torus(rng, largest, thin):
+    outer = largest / 2
+    tube = rng.uniform(max(thin / 2, 0.15 * outer), 0.45 * outer)
+    rc = outer - tube
+    v, t = _revolve(_arc(rc, 0, tube, 0, 2 * np.pi, _RINGS + 2)[:-1], closed=True)
+    return v, t, (Part("hull", points=_hull_points(v)),), {"outer_diameter_m": round(largest, 5), "tube_radius_m": round(tube, 5)}
+
+
+def _tube(rng, largest, thin):
+    diam, height = _dims(rng, largest, thin, 2)
+    ro, h = diam / 2, height / 2
+    ri = ro * rng.uniform(0.3, 0.85)
+    v, t = _revolve([(ri, -h), (ro, -h), (ro, h), (ri, h)], closed=True)
+    # Collides as its outer cylinder: nothing falls into the hole, which is rarely visible anyway.
+    return v, t, (Part("cylinder", (ro, h)),), {"diameter_m": round(diam, 5), "height_m": round(height, 5), "inner_ratio": round(ri / ro, 4)}
+
+
+def _superquadric(rng, largest, thin):
+    a = _dims(rng, largest, thin, 3) / 2
+    # Exponents <= 1.6 keep the surface convex, so its hull is a faithful collision shape.
+    e1, e2 = rng.uniform(0.25, 1.6, size=2)
+    eta = np.linspace(-np.pi / 2, np.pi / 2, _RINGS + 3)
+    om = np.linspace(-np.pi, np.pi, _SEG, endpoint=False)
+    ee, oo = np.meshgrid(eta, om, indexing="ij")
+    ce, se, co, so = np.cos(ee), np.sin(ee), np.cos(oo), np.sin(oo)
+    v = np.stack(
+        [a[0] * _spow(ce, e1) * _spow(co, e2), a[1] * _spow(ce, e1) * _spow(so, e2), a[2] * _spow(se, e1)], -1
+    ).reshape(-1, 3)
+    v, t = _clean(v, _grid_triangles(len(eta), len(om), wrap_rows=False))
+    return v, t, (Part("hull", points=_hull_points(v, 32)),), {
+        "semi_axes_m": a.round(5).tolist(),
+        "exponents": [round(float(e1), 4), round(float(e2), 4)],
+    }
+
+
+def _hull(rng, largest, thin):
+    from scipy.spatial import ConvexHull
+
+    n = int(rng.integers(8, 25))
+    p = rng.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p *= rng.uniform(0.5, 1.0, size=(n, 1))
+    p *= _dims(rng, 1.0, 0.2, 3)  # anisotropic before fitting
+    p, _ = fit_mesh(p, largest, thin)
+    hull = ConvexHull(p)
+    remap = np.full(len(p), -1)
+    remap[hull.vertices] = np.arange(len(hull.vertices))
+    v, t = _clean(p[hull.vertices], remap[hull.simplices])
+    return v, t, (Part("hull", points=v.astype(np.float64)),), {"points": int(len(v))}
+
+
+def _union(rng, largest, thin):
+    """2-4 primitives glued together (toys, tools): each part thick enough on its own."""
+    n = int(rng.integers(2, 5))
+    parts: list[Part] = []
+    verts: list[np.ndarray] = []
+    tris: list[np.ndarray] = []
+    kinds: list[str] = []
+    base = largest * 0.6
+    offset = 0
+    for k in range(n):
+        kind = str(rng.choice(["box", "cylinder", "sphere", "capsule"]))
+        gen = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _capsule}[kind]
+        v, t, (p,), _ = gen(rng, rng.uniform(0.55, 1.0) * base, thin)
+        r = np.eye(3) if k == 0 else _random_rotation(rng)
+        c = np.zeros(3) if k == 0 else (rng.uniform(-0.5, 0.5, 3) * (np.concatenate(verts).max(0) - np.concatenate(verts).min(0)))
+        verts.append(v.astype(np.float64) @ r.T + c)
+        tris.append(t + offset)
+        offset += len(v)
+        parts.append(Part(p.kind, p.size, tuple(c), _quat_from_matrix(r), p.points))
+        kinds.append(kind)
+    v = np.concatenate(verts)
+    ext = v.max(0) - v.min(0)
+    centre = _centre(v)
+    s = largest / ext.max()  # uniform: primitives stay primitives
+    v = (v - centre) * s
+    parts = [
+        Part(
+            p.kind,
+            tuple(x * s for x in p.size),
+            tuple((np.asarray(p.pos) - centre) * s),
+            p.quat,
+            None if p.points is None else (p.points - centre) * s,
+        )
+        for p in parts
+    ]
+    return v.astype(np.float32), np.concatenate(tris).astype(np.int32), tuple(parts), {"parts": kinds}
+
+
+_GENERATORS: dict[str, Callable] = {
+    "box": _box,
+    "cylinder": _cylinder,
+    "sphere": _sphere,
+    "capsule": _capsule,
+    "cone": _cone,
+    "torus": _torus,
+    "tube": _tube,
+    "superquadric": _superquadric,
+    "hull": _hull,
+    "union": _union,
+}
+
+
+def make_shape(kind: str, rng: np.random.Generator, largest: float, thin: float) -> Shape:
+    """One procedural shape of ``kind`` with largest side ``largest`` and no side under ``thin``."""
+    if kind not in _GENERATORS:
+        raise ConfigError(f"unknown shape '{kind}'; choose from {list(PROCEDURAL_KINDS)}")
+    v, t, parts, params = _GENERATORS[kind](rng, float(largest), float(thin))
+    return Shape(kind, np.asarray(v, np.float32), np.asarray(t, np.int32), tuple(parts), {"largest_m": round(float(largest), 5), **params})
+
+
+def random_procedural(
+    rng: np.random.Generator, largest: float, thin: float, kinds: Sequence[str], weights: Sequence[float] | None = None
+) -> Shape:
+    p = None if weights is None else np.asarray(weights, float) / float(np.sum(weights))
+    return make_shape(str(kinds[int(rng.choice(len(kinds), p=p))]), rng, largest, thin)
+
+
+# --------------------------------------------------------------------------- mesh library
+
+
+@dataclass(frozen=True, eq=False)
+class _Loaded:
+    vertices: np.ndarray  # float64, centred, original units
+    triangles: np.ndarray  # int32
+
+
+def _read_mesh(path: Path) -> _Loaded:
+    """Read and sanity-check one mesh file; raise DataError with the reason when unusable."""
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise DataError(f"{path.name}: unsupported mesh format; use one of {list(MESH_SUFFIXES)}")
+    try:
+        mesh = o3d.io.read_triangle_mesh(str(path))
+    except Exception as exc:  # open3d raises RuntimeError on some malformed files
+        raise DataError(f"{path.name}: cannot read mesh ({exc})") from None
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    t = np.asarray(mesh.triangles, dtype=np.int64)
+    if len(v) < 4 or len(t) < 1:
+        raise DataError(f"{path.name}: no triangles could be read (corrupt or empty mesh)")
+    if not np.all(np.isfinite(v)) or t.min() < 0 or t.max() >= len(v):
+        raise DataError(f"{path.name}: mesh has non-finite vertices or bad face indices")
+    ext = v.max(0) - v.min(0)
+    if ext.max() <= 0:
+        raise DataError(f"{path.name}: mesh has no extent (all vertices coincide)")
+    if ext.min() <= ext.max() * 1e-9:
+        raise DataError(f"{path.name}: mesh is flat (zero thickness); it cannot be given a minimum thickness")
+    if len(t) > _LIB_MAX_TRIS:
+        mesh = mesh.simplify_quadric_decimation(target_number_of_triangles=_LIB_MAX_TRIS)
+        v2 = np.asarray(mesh.vertices, dtype=np.float64)
+        t2 = np.asarray(mesh.triangles, dtype=np.int64)
+        if len(t2) >= 4 and np.all(np.isfinite(v2)):
+            v, t = v2, t2
+    v = v - _centre(v)
+    return _Loaded(v, t.astype(np.int32))
+
+
+class MeshLibrary:
+    """The user's ``--objects DIR``: every readable mesh file, loaded lazily and cached.
+
+    `scan` checks each file once up front so that a frame's object draw only chooses among
+    usable meshes (otherwise a frame would depend on which files failed in which worker).
+    Problems go to ``on_skip(path, reason)``: the CLI prints them, tests collect them.
+    """
+
+    def __init__(self, paths: Sequence[Path], cache_size: int = 256) -> None:
+        self.paths = [Path(p) for p in paths]
+        self._cache: OrderedDict[int, _Loaded] = OrderedDict()
+        self._cache_size = cache_size
+
+    @staticmethod
+    def list_files(folder: str | Path) -> list[Path]:
+        d = Path(folder)
+        if not d.exists():
+            raise ConfigError(f"--objects {d}: no such folder; give a folder of .obj/.stl/.off/.ply meshes")
+        if not d.is_dir():
+            raise ConfigError(f"--objects {d}: not a folder; give a folder of .obj/.stl/.off/.ply meshes")
+        files = sorted(p for p in d.rglob("*") if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+        if not files:
+            raise ConfigError(f"--objects {d}: no .obj/.stl/.off/.ply files in the folder")
+        return files
+
+    @classmethod
+    def scan(
+        cls,
+        folder: str | Path,
+        on_skip: Callable[[Path, str], None] | None = None,
+        progress: Callable[[int], None] | None = None,
+    ) -> MeshLibrary:
+        """Load every mesh once; keep the good ones, report each bad one once."""
+        good: list[Path] = []
+        files = cls.list_files(folder)
+        for p in files:
+            try:
+                _read_mesh(p)
+                good.append(p)
+            except DataError as exc:
+                if on_skip is not None:
+                    on_skip(p, str(exc))
+            if progress is not None:
+                progress(1)
+        if not good:
+            raise ConfigError(f"--objects {folder}: none of the {len(files)} mesh files could be read")
+        return cls(good)
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    def _get(self, i: int) -> _Loaded:
+        if i in self._cache:
+            self._cache.move_to_end(i)
+            return self._cache[i]
+        m = _read_mesh(self.paths[i])
+        self._cache[i] = m
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return m
+
+    def shape(self, i: int, largest: float, thin: float) -> Shape:
+        """Mesh ``i`` fitted to the sampled size; collides as its convex hull (<= 24 vertices)."""
+        m = self._get(i)
+        v, scale = fit_mesh(m.vertices, largest, thin)
+        return Shape(
+            "mesh",
+            v.astype(np.float32),
+            m.triangles,
+            (Part("hull", points=_hull_points(v)),),
+            {"file": self.paths[i].name, "largest_m": round(float(largest), 5), "scale": scale.round(6).tolist()},
+        )
