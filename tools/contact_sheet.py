@@ -54,7 +54,7 @@ def render_tile(frame: Frame, index: int, scale: int = 2) -> np.ndarray:
     img = colorize_depth(frame.depth)
     valid = valid_mask(frame.depth)
     if frame.label is not None:
-        obj = frame.label.astype(bool)
+        obj = frame.label.astype(bool) & valid  # invalid pixels stay black
         img[obj] = (0.6 * img[obj] + 0.4 * np.array([40, 40, 255])).astype(np.uint8)  # red tint (BGR)
     img = cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_NEAREST)
     if frame.label is not None:
