@@ -39,26 +39,36 @@ OBJECT_RGB = np.array([255, 140, 0], dtype=np.float32)  # orange
 UNKNOWN_RGB = np.array([255, 0, 255], dtype=np.uint8)  # magenta
 
 
+def _lut() -> np.ndarray:
+    """[class (0 background, 1 object, 2 unknown), grey level] -> RGB."""
+    g = np.arange(256, dtype=np.float32)[:, None]
+    lut = np.empty((3, 256, 3), dtype=np.uint8)
+    lut[0] = np.repeat(g, 3, axis=1).astype(np.uint8)
+    lut[1] = np.clip(0.35 * g + 0.65 * OBJECT_RGB, 0, 255).astype(np.uint8)
+    lut[2] = UNKNOWN_RGB
+    return lut
+
+
+_LUT = _lut().reshape(768, 3)  # row = class * 256 + grey
+
+
 def overlay_rgb(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """H x W x 3 uint8 picture of a mask (0/1/255) over its depth frame."""
+    """H x W x 3 uint8 picture of a mask (0/1/255) over its depth frame (one table lookup)."""
     depth = np.asarray(depth, dtype=np.float32)
     mask = np.asarray(mask)
     if depth.shape != mask.shape:
         raise DataError(f"overlay: depth {depth.shape} and mask {mask.shape} differ in size")
     valid = mask != UNKNOWN
-    shade = np.zeros(depth.shape, dtype=np.float32)
+    row = np.zeros(depth.shape, dtype=np.uint16)
     if valid.any():
         d = depth[valid]
         lo, hi = float(d.min()), float(d.max())
         span = hi - lo if hi > lo else 1.0
-        # nearer = brighter, 60..220 so black and white stay free for nothing
-        shade[valid] = 220.0 - 160.0 * (d - lo) / span
-    out = np.repeat(shade[:, :, None], 3, axis=2)
-    obj = mask == 1
-    out[obj] = 0.35 * out[obj] + 0.65 * OBJECT_RGB
-    out = np.clip(out, 0, 255).astype(np.uint8)
-    out[~valid] = UNKNOWN_RGB
-    return out
+        # nearer = brighter, 60..220, so the grey never looks like an unknown or a saturated pixel
+        row[valid] = (220.0 - 160.0 * (d - lo) / span).astype(np.uint16)
+    row[mask == 1] += 256
+    row[~valid] = 512
+    return _LUT.take(row, axis=0)
 
 
 class ReplayWriter:
