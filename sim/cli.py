@@ -225,16 +225,25 @@ def simulate(
 
         th = threading.Thread(target=pump, daemon=True)
         th.start()
+
+        def record(stats: dict[str, Any]) -> None:
+            shard_stats[stats["file"]] = stats
+            manifest["shards"] = shard_stats
+            _write_json_atomic(out / MANIFEST, manifest)
+
         try:
-            with ctx.Pool(
-                min(int(workers), len(todo)),
-                initializer=_init_worker,
-                initargs=(config.to_dict(), int(seed), library_paths, str(out), q),
-            ) as pool:
-                for stats in pool.imap_unordered(_write_shard, todo):
-                    shard_stats[stats["file"]] = stats
-                    manifest["shards"] = shard_stats
-                    _write_json_atomic(out / MANIFEST, manifest)
+            if int(workers) == 1:  # in this process: no start-up cost for small runs and tests
+                _init_worker(config.to_dict(), int(seed), library_paths, str(out), q)
+                for task in todo:
+                    record(_write_shard(task))
+            else:
+                with ctx.Pool(
+                    min(int(workers), len(todo)),
+                    initializer=_init_worker,
+                    initargs=(config.to_dict(), int(seed), library_paths, str(out), q),
+                ) as pool:
+                    for stats in pool.imap_unordered(_write_shard, todo):
+                        record(stats)
         finally:
             stop.set()
             th.join(timeout=1.0)

@@ -85,7 +85,7 @@ def _normalised(cam: Camera, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, 
     k = np.array([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]], dtype=np.float64)
     pts = np.stack([u.ravel(), v.ravel()], -1).astype(np.float64).reshape(-1, 1, 2)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-9)
-    und = cv2.undistortPointsIter(pts, k, np.asarray(cam.distortion, np.float64), None, None, crit).reshape(-1, 2)
+    und = cv2.undistortPoints(pts, k, np.asarray(cam.distortion, np.float64), None, None, None, crit).reshape(-1, 2)
     return und[:, 0].reshape(u.shape), und[:, 1].reshape(u.shape)
 
 

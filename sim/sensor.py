@@ -56,7 +56,7 @@ class SensorConfig:
     albedo_object: tuple[float, float] = (0.2, 1.0)  # per object; dark objects get noisy (real capture)
     range_ref_m: float = 0.30  # amplitude reference distance (camera ~30 cm above the table)
     vignetting_power: float = 4.0  # |ray|^-4 (SENSOR.md step 2)
-    cone_half_angle_deg: tuple[float, float] = (32.5, 34.0)  # corner cut-off, per frame (units differ)
+    cone_half_angle_deg: tuple[float, float] = (31.5, 33.0)  # corner cut-off, per frame (fitted, see above)
     cone_width_deg: float = 0.6  # logistic width of the cut-off (real capture: 31 -> 35 deg)
     exposure: tuple[float, float] = (0.7, 1.4)  # auto-exposure error factor, log-uniform per frame
     amplitude_noise: float = 0.1  # relative shot noise on A (ragged invalid boundaries)
@@ -123,7 +123,7 @@ class SensorConfig:
             multipath_gain=(0.0, 0.0),
             amplitude_noise=0.0,
             amplitude_min=0.0,
-            amplitude_max=math.inf,
+            amplitude_max=1e9,
             flying_filter=False,
             dead_pixel_fraction=0.0,
             cone_half_angle_deg=(90.0, 90.0),
