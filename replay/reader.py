@@ -107,6 +107,7 @@ class _TopicInfo:
     first_encoding: str | None = None  # pixel encoding of the first message seen
     first_size: tuple[int, int] | None = None
     peek_error: str | None = None
+    n_messages: int | None = None  # from the summary statistics; None when unknown
 
     @property
     def kind(self) -> str:
@@ -129,7 +130,7 @@ class _TopicInfo:
         if self.peek_error:
             bits.append("unreadable")
         elif self.kind == "image" and self.first_encoding is None:
-            bits.append("no messages seen")
+            bits.append("no messages" if self.n_messages == 0 else "no messages seen")
         return f"{self.topic} ({', '.join(bits)})"
 
 
@@ -420,7 +421,7 @@ def _pick_labels(topics: dict[str, _TopicInfo], depth: str) -> str | None:
     cands = [
         t for t in topics.values()
         if t.kind == "image" and t.topic != depth and {"label", "labels"} & set(_tokens(t.topic))
-        and (t.first_encoding is None or t.first_encoding in LABEL_ENCODINGS)
+        and (t.first_encoding is None or t.first_encoding in LABEL_ENCODINGS) and t.n_messages != 0
     ]
     if len(cands) > 1:
         cands = [t for t in cands if _namespace(t.topic) == _namespace(depth)]
@@ -428,7 +429,7 @@ def _pick_labels(topics: dict[str, _TopicInfo], depth: str) -> str | None:
 
 
 def _pick_info(topics: dict[str, _TopicInfo], depth: str) -> str | None:
-    cands = [t for t in topics.values() if t.kind == "info"]
+    cands = [t for t in topics.values() if t.kind == "info" and t.n_messages != 0]
     if len(cands) > 1:
         cands = [t for t in cands if _namespace(t.topic) == _namespace(depth)]
     return cands[0].topic if len(cands) == 1 else None
@@ -715,6 +716,9 @@ def open_depth_stream(
 
     for ch in channels.values():
         note(ch)
+    if counts is not None:
+        for t in topics.values():
+            t.n_messages = sum(counts.get(c, 0) for c in t.channel_ids)
     headers: list[Header] = []
     damage: str | None = None
     infos: dict[str, dict[str, Any]] = {}

@@ -219,13 +219,16 @@ def replay(
     rate: float | None = None,
     threshold: float | None = None,
     on_frame: Callable[[FrameResult], None] | None = None,
+    warmup: int = 1,
 ) -> ReplaySummary:
     """Segment every frame of ``stream``; optionally pace, score, and write ``out``.
 
     ``stream`` is normally a `replay.reader.DepthStream` (any iterable of `Frame` works, then
     ``out`` copies nothing through). ``threshold`` overrides the segmenter's. When the stream
     breaks mid-way (damaged file, malformed frame), ``out`` is still completed and a
-    `ReplayDataError` carrying the partial summary is raised.
+    `ReplayDataError` carrying the partial summary is raised. The first frame is first run
+    ``warmup`` times untimed (onnxruntime allocates on its first run), so the latency
+    percentiles describe the steady state; the wall clock for frames/s includes it.
     """
     if rate is not None and not (rate > 0 and math.isfinite(rate)):
         raise ConfigError(f"--rate must be a positive number (1.0 = real time), got {rate}")
@@ -257,6 +260,9 @@ def replay(
     try:
         try:
             for fr in stream:
+                if n == 0:
+                    for _ in range(max(0, int(warmup))):
+                        segmenter.predict(fr.depth)
                 is_late = False
                 if rate is not None:
                     if first_stamp is None:

@@ -161,3 +161,14 @@ def test_unpaired_labels_do_not_pile_up(tmp_path):
     s = open_depth_stream(p, labels_topic="/cam/labels", window=8)
     frames = list(s)
     assert len(frames) == 1 and frames[0].label is None
+
+
+def test_registered_but_empty_label_topic_is_not_used(tmp_path):
+    """FrameWriter registers /pico_flexx/labels even for unlabelled captures (e.g. imported PLY)."""
+    p = tmp_path / "nolabels.mcap"
+    with FrameWriter(p) as w:
+        for i in range(2):
+            w.write(T0 + i, scene(i)[0], intrinsics=(1, 1, 1, 1))
+    s = open_depth_stream(p)
+    assert s.labels_topic is None and s.topics["/pico_flexx/labels"].n_messages == 0
+    assert [fr.label for fr in s] == [None, None]
