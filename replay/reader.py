@@ -632,7 +632,9 @@ def _check_file(path: Path) -> int:
     if not path.exists():
         raise McapDataError(f"{path}: no such file")
     if path.is_dir():
-        raise McapDataError(f"{path}: is a directory; pass one .mcap recording")
+        inside = sorted(f.name for f in path.glob("*.mcap") if not f.name.startswith("."))
+        hint = f" (it holds {_list(inside, 3)})" if inside else ""
+        raise McapDataError(f"{path}: is a directory; pass one .mcap recording{hint}")
     size = path.stat().st_size
     if size == 0:
         raise McapDataError(f"{path}: empty file (0 bytes), not an MCAP recording")
