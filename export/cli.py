@@ -120,6 +120,9 @@ def export_model(args: argparse.Namespace) -> dict[str, Any]:
     for flag in ("check_frames", "calib_frames", "val_frames", "threads"):
         if getattr(args, flag) < 1:
             raise ConfigError(f"--{flag.replace('_', '-')} must be >= 1, got {getattr(args, flag)}")
+    import torch
+
+    torch.set_num_threads(args.threads)  # the reference forward passes: never more threads than asked
     model, meta, name = load_source(args)
     source_channels = meta.in_channels
     if args.single_channel:

@@ -1,0 +1,299 @@
+"""Latency of exported models the way an edge engineer measures it.
+
+Why it is built like this:
+- The unit is the *whole frame*: raw depth in, mask out (`Segmenter.predict`), because that is
+  what the robot waits for; preprocessing, inference and postprocessing are timed inside the
+  same calls and reported separately, so a slow stage is visible.
+- Several models are timed round-robin (the starting model rotates every round): a noisy
+  neighbour (this machine shares its 2 cores with training) then hits every model alike, and
+  the ratios between models stay meaningful even when absolute numbers wobble.
+- Session load and the first run are reported on their own (the first run allocates and
+  plans); percentiles come from the timed runs after warm-up only.
+- The CPU model, its ISA flags, the onnxruntime version and the thread settings are recorded
+  with the numbers: int8 and fp32 speed depend on them (AVX-512 VNNI makes int8 shine).
+
+Torch-free (numpy + onnxruntime + psutil); `time_torch` imports torch only when called.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from edge.errors import ConfigError, ModelError
+from edge.infer import Segmenter
+
+__all__ = [
+    "ModelSpec",
+    "cpu_info",
+    "runtime_info",
+    "stats",
+    "bench_models",
+    "export_random_model",
+    "time_torch",
+    "ISA_FLAGS",
+]
+
+ISA_FLAGS = (
+    "sse4_2", "avx", "avx2", "fma", "f16c", "avx512f", "avx512bw", "avx512vl", "avx512_vnni", "avx_vnni",
+    "avx512_bf16", "avx512_fp16", "amx_tile", "amx_int8", "amx_bf16", "asimd", "asimddp", "sve",
+)
+
+
+@dataclass
+class ModelSpec:
+    """One model to time: file, display name, intra-op threads."""
+
+    path: Path
+    name: str = ""
+    threads: int = 2
+    extra: dict[str, Any] = field(default_factory=dict)  # copied into the result (e.g. variant labels)
+
+    def __post_init__(self) -> None:
+        self.path = Path(self.path)
+        if not self.name:
+            self.name = self.path.stem
+
+
+def cpu_info() -> dict[str, Any]:
+    """CPU model and the ISA flags that matter for onnxruntime kernels (Linux /proc/cpuinfo)."""
+    model, flags = platform.processor() or platform.machine(), set()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                key, _, val = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "Hardware", "CPU part") and model in ("", platform.machine(), platform.processor()):
+                    model = val.strip()
+                elif key in ("flags", "Features") and not flags:
+                    flags = set(val.split())
+    except OSError:
+        pass
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        affinity = os.cpu_count() or 0
+    return {
+        "model": model,
+        "isa": [f for f in ISA_FLAGS if f in flags],
+        "logical_cpus": os.cpu_count(),
+        "usable_cpus": affinity,
+        "machine": platform.machine(),
+    }
+
+
+def runtime_info() -> dict[str, Any]:
+    import onnxruntime as ort
+
+    return {
+        "onnxruntime": ort.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+        "providers": ["CPUExecutionProvider"],
+    }
+
+
+def stats(ms: Sequence[float]) -> dict[str, float]:
+    a = np.asarray(ms, dtype=np.float64)
+    p50, p90, p99 = np.percentile(a, [50, 90, 99])
+    return {
+        "p50": float(p50),
+        "p90": float(p90),
+        "p99": float(p99),
+        "mean": float(a.mean()),
+        "min": float(a.min()),
+        "max": float(a.max()),
+    }
+
+
+def _rss_mb() -> float:
+    import psutil
+
+    return psutil.Process().memory_info().rss / 2**20
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far (VmHWM; ru_maxrss where /proc is missing)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def bench_models(
+    specs: Sequence[ModelSpec],
+    frames: Sequence[np.ndarray],
+    runs: int = 200,
+    warmup: int = 20,
+    spin: bool = True,
+    on_round: Callable[[int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Time every model on ``frames`` (cycled), interleaved round-robin; one result dict per model."""
+    if not specs:
+        raise ConfigError("no model to benchmark")
+    if runs < 1 or warmup < 0:
+        raise ConfigError(f"need runs >= 1 and warmup >= 0, got runs={runs}, warmup={warmup}")
+    if not frames:
+        raise ConfigError("no frame to benchmark on")
+    entries = []
+    for spec in specs:
+        gc.collect()
+        rss0 = _rss_mb()
+        t0 = time.perf_counter()
+        seg = Segmenter(spec.path, threads=spec.threads, spin=spin)
+        t1 = time.perf_counter()
+        seg.predict(frames[0])
+        t2 = time.perf_counter()
+        entries.append(
+            {
+                "spec": spec,
+                "seg": seg,
+                "load_ms": (t1 - t0) * 1e3,
+                "first_run_ms": (t2 - t1) * 1e3,
+                "rss_delta_mb": _rss_mb() - rss0,
+                "t": {"whole": [], "pre": [], "infer": [], "post": []},
+            }
+        )
+    n = len(entries)
+    for r in range(warmup):
+        for e in entries:
+            e["seg"].predict(frames[r % len(frames)])
+    gc.collect()
+    for r in range(runs):
+        frame = frames[r % len(frames)]
+        for k in range(n):
+            e = entries[(r + k) % n]
+            t0 = time.perf_counter()
+            pred = e["seg"].predict(frame)
+            t1 = time.perf_counter()
+            t = e["t"]
+            t["whole"].append((t1 - t0) * 1e3)
+            t["pre"].append(pred.timings["pre"])
+            t["infer"].append(pred.timings["infer"])
+            t["post"].append(pred.timings["post"])
+        if on_round is not None:
+            on_round(r)
+    results = []
+    for e in entries:
+        seg: Segmenter = e["seg"]
+        spec: ModelSpec = e["spec"]
+        st = {k: stats(v) for k, v in e["t"].items()}
+        m = seg.meta
+        results.append(
+            {
+                "name": spec.name,
+                "path": str(spec.path),
+                "threads": spec.threads,
+                "precision": seg.precision,
+                "graph": "with-preprocessing" if seg.with_preprocessing else "logits",
+                "encoder": m.encoder + ("_bn" if m.batch_norm and not m.encoder.endswith("_bn") else ""),
+                "width": m.width,
+                "in_channels": m.in_channels,
+                "params": m.params,
+                "weights": m.training.get("weights", "trained") if isinstance(m.training, dict) else "trained",
+                "size_mb": spec.path.stat().st_size / 1e6,
+                "load_ms": e["load_ms"],
+                "first_run_ms": e["first_run_ms"],
+                "rss_delta_mb": e["rss_delta_mb"],
+                "runs": runs,
+                "p50_ms": st["infer"]["p50"],
+                "p90_ms": st["infer"]["p90"],
+                "p99_ms": st["infer"]["p99"],
+                "mean_ms": st["infer"]["mean"],
+                "min_ms": st["infer"]["min"],
+                "max_ms": st["infer"]["max"],
+                "whole_frame_p50_ms": st["whole"]["p50"],
+                "whole_frame_p90_ms": st["whole"]["p90"],
+                "whole_frame_p99_ms": st["whole"]["p99"],
+                "fps": 1000.0 / st["whole"]["mean"],
+                "infer_fps": 1000.0 / st["infer"]["mean"],
+                "timings": st,
+            }
+            | spec.extra
+        )
+    base = results[0]
+    for res in results:
+        res["ratio_to_first"] = res["whole_frame_p50_ms"] / base["whole_frame_p50_ms"]
+        res["infer_ratio_to_first"] = res["p50_ms"] / base["p50_ms"]
+    return results
+
+
+def export_random_model(encoder: str, out: Path, width: float = 1.0, single_channel: bool = False, int8: bool = False) -> Path:
+    """Export an untrained architecture with ``depthseg-export --random-init`` in a subprocess.
+
+    A subprocess keeps torch out of the timing process (its threads and memory would skew the
+    numbers, and the edge path must not import it).
+    """
+    cmd = [sys.executable, "-m", "export.cli", "--random-init", "--encoder", encoder, "--width", repr(float(width)),
+           "--out", str(out), "--check-frames", "2", "--json"]
+    if single_channel:
+        cmd.append("--single-channel")
+    if int8:
+        cmd += ["--int8", "--force", "--calib-frames", "8", "--val-frames", "4"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
+        raise ModelError(f"exporting {encoder} width {width:g} for comparison failed: {tail}")
+    return out
+
+
+def time_torch(seg: Segmenter, frames: Sequence[np.ndarray], runs: int, warmup: int) -> dict[str, Any]:
+    """PyTorch eager (same architecture, random weights: latency does not depend on them).
+
+    Imports torch: only for ``depthseg-bench --torch``, never on the edge path.
+    """
+    import torch
+
+    from edge.model import build_model
+    from edge.preprocess import preprocess
+
+    torch.set_num_threads(seg.threads)
+    m = seg.meta
+    model = build_model(m).eval()
+    thr_logit = float(np.log(seg.threshold / (1.0 - seg.threshold)))
+
+    def whole(d: np.ndarray) -> tuple[float, float]:
+        t0 = time.perf_counter()
+        pre = preprocess(d, m.in_channels, m.pad_multiple)
+        t1 = time.perf_counter()
+        with torch.inference_mode():
+            out = model(torch.from_numpy(pre.x[None])).numpy()
+        t2 = time.perf_counter()
+        h, w = pre.shape
+        mask = (out[0, 0, :h, :w] >= thr_logit).astype(np.uint8)
+        mask[~pre.valid] = 255
+        t3 = time.perf_counter()
+        return (t2 - t1) * 1e3, (t3 - t0) * 1e3
+
+    for r in range(warmup):
+        whole(frames[r % len(frames)])
+    inf, tot = [], []
+    for r in range(runs):
+        a, b = whole(frames[r % len(frames)])
+        inf.append(a)
+        tot.append(b)
+    si, sw = stats(inf), stats(tot)
+    return {
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "torch_p50_ms": si["p50"],
+        "torch_p90_ms": si["p90"],
+        "torch_whole_frame_p50_ms": sw["p50"],
+        "torch_fps": 1000.0 / sw["mean"],
+    }
