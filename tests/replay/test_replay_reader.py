@@ -172,3 +172,20 @@ def test_registered_but_empty_label_topic_is_not_used(tmp_path):
     s = open_depth_stream(p)
     assert s.labels_topic is None and s.topics["/pico_flexx/labels"].n_messages == 0
     assert [fr.label for fr in s] == [None, None]
+
+
+def test_data_section_crc_and_uncompressed_chunks_read_cleanly(tmp_path):
+    """CRCs are verified, so a writer that adds the optional data-section CRC must still pass."""
+    from mcap.writer import CompressionType
+
+    p = tmp_path / "crc.mcap"
+    with open(p, "wb") as fh:
+        w = Writer(fh, chunk_size=4096, enable_data_crcs=True, compression=CompressionType.NONE)
+        w.start("ros2", "test")
+        sid = w.register_schema(rosmsg.IMAGE_TYPE, "ros2msg", rosmsg.IMAGE_MSGDEF.encode())
+        ch = w.register_channel("/d", "cdr", sid)
+        for i in range(5):
+            w.add_message(ch, i + 1, rosmsg.encode_image(i + 1, "c", scene(i)[0], "32FC1"), i + 1)
+        w.finish()
+    s = open_depth_stream(p)
+    assert len(list(s)) == 5 and s.damage is None
