@@ -268,3 +268,19 @@ def test_rosbags_test_bag_malformed_image():
     assert frames == []
     msg = one_line(err)
     assert "data has 30 bytes but height x step = 480 x 1920" in msg and "malformed" in msg
+
+
+def test_flipped_pixel_bytes_in_an_uncompressed_chunk_fail_the_crc(tmp_path):
+    """Without compression a flipped pixel still parses; only the chunk CRC can tell."""
+    from mcap.writer import CompressionType
+
+    rec = write_ros2(tmp_path / "raw.mcap", n=N, compression=CompressionType.NONE)
+    data = bytearray(rec.path.read_bytes())
+    start, length = chunk_spans(rec.path)[N // 2]
+    data[start + length - 100] ^= 0x01  # a pixel byte near the end of the chunk
+    bad = tmp_path / "flip.mcap"
+    bad.write_bytes(bytes(data))
+    frames, err = read_until_error(bad)
+    assert err is not None and "checksum mismatch" in one_line(err)
+    assert 0 < len(frames) < N
+    assert_prefix_intact(frames, rec)
