@@ -39,19 +39,22 @@ class PhysicsUnstable(RuntimeError):
 class PhysicsConfig:
     """Drop simulation settings; defaults trade a little contact accuracy for speed.
 
-    The timestep is coarse (8 ms, MuJoCo's default is 2 ms) but below half the default contact
-    time constant (20 ms), which keeps contacts stable; the floor is a half-space, so nothing
-    can tunnel through it.
+    The timestep is coarse (10 ms; MuJoCo's default is 2 ms) but no more than half the default
+    contact time constant (20 ms), which keeps contacts stable; the floor is a half-space, so
+    nothing can tunnel through it. Measured on 193 non-empty default scenes: no unstable drop,
+    median deepest penetration 0.3 mm; in ~1 % of scenes two objects that hit each other at
+    up to 6 m/s (a 2 m fall) end up overlapping by 5-15 mm, at 6, 8 and 10 ms steps alike. The rest test is loose on purpose: continuing a "resting" scene
+    for another second moves the median object by under 1 mm.
     """
 
-    timestep_s: float = 0.008
+    timestep_s: float = 0.01
     max_time_s: float = 3.0  # cap: render whatever pose the objects have by then
-    rest_linear_m_s: float = 0.005  # at rest: every body slower than this ...
-    rest_angular_rad_s: float = 0.1  # ... and turning slower than this ...
-    rest_checks: int = 3  # ... on this many consecutive checks
+    rest_linear_m_s: float = 0.01  # at rest: every body slower than this ...
+    rest_angular_rad_s: float = 0.2  # ... and turning slower than this ...
+    rest_checks: int = 2  # ... on this many consecutive checks
     check_every: int = 5  # steps between checks
     sleep_tolerance: float = 0.01  # MuJoCo's own sleeping (velocity tolerance)
-    friction: tuple[float, float, float] = (1.2, 0.02, 0.005)  # sliding, torsional, rolling
+    friction: tuple[float, float, float] = (1.2, 0.05, 0.02)  # sliding, torsional, rolling (m)
     max_hull_vertices: int = 32
     max_attempts: int = 5  # redraws after an unstable drop before giving up on the frame
 

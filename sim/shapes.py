@@ -24,6 +24,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -60,7 +61,8 @@ MESH_SUFFIXES = (".obj", ".stl", ".off", ".ply")
 # Render mesh resolution: enough for 1-2 px accuracy at 20 cm, small enough for a fast BVH.
 _SEG = 24  # segments around an axis of revolution
 _RINGS = 10  # rings along a profile arc / latitude bands
-_HULL_VERTS = 24  # collision hull size for sampled surfaces (torus, superquadric, meshes)
+_HULL_VERTS = 24  # collision hull size for library meshes
+_HULL_SEG = 12  # segments of coarse collision rings (cone, torus, superquadric)
 _LIB_MAX_TRIS = 1500  # library meshes above this are decimated for ray casting
 
 
@@ -132,19 +134,34 @@ def _random_rotation(rng: np.random.Generator) -> np.ndarray:
     )
 
 
-def _grid_triangles(rows: int, cols: int, wrap_rows: bool) -> np.ndarray:
-    """Two triangles per quad of a rows x cols vertex grid that wraps around the columns."""
+@lru_cache(maxsize=256)
+def _grid_triangles(rows: int, cols: int, wrap_rows: bool, pole_first: bool = False, pole_last: bool = False) -> np.ndarray:
+    """Two triangles per quad of a rows x cols vertex grid that wraps around the columns.
+
+    A pole row (all its vertices at one point) keeps only the triangle of each quad that is
+    not degenerate. Cached: the topology depends only on the grid size.
+    """
     j = np.arange(rows if wrap_rows else rows - 1)
     i = np.arange(cols)
     jj, ii = np.meshgrid(j, i, indexing="ij")
     j1 = (jj + 1) % rows
     i1 = (ii + 1) % cols
     a, b, c, d = jj * cols + ii, j1 * cols + ii, j1 * cols + i1, jj * cols + i1
-    return np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    t1 = np.stack([a, b, c], -1)  # degenerate where row j1 is a pole
+    t2 = np.stack([a, c, d], -1)  # degenerate where row j is a pole
+    keep1 = np.ones(jj.shape, bool)
+    keep2 = np.ones(jj.shape, bool)
+    if pole_first:
+        keep2 &= jj != 0
+    if pole_last:
+        keep1 &= j1 != rows - 1
+    t = np.concatenate([t1[keep1], t2[keep2]]).astype(np.int32)
+    t.flags.writeable = False
+    return t
 
 
 def _clean(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop zero-area triangles (grid poles) so the BVH holds only real faces."""
+    """Drop zero-area triangles (for meshes whose degenerate faces are not known up front)."""
     v = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     area2 = np.linalg.norm(np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]), axis=1)
@@ -155,12 +172,14 @@ def _clean(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.
 def _revolve(profile: Sequence[tuple[float, float]], closed: bool = False, seg: int = _SEG):
     """Surface of revolution about z from an (r, z) polyline; open profiles end on the axis."""
     p = np.asarray(profile, dtype=float)
+    p[np.abs(p[:, 0]) < 1e-12, 0] = 0.0  # arcs ending on the axis: exact poles
     th = np.linspace(0.0, 2 * np.pi, seg, endpoint=False)
-    v = np.stack(
-        [p[:, None, 0] * np.cos(th)[None], p[:, None, 0] * np.sin(th)[None], np.broadcast_to(p[:, None, 1], (len(p), seg))],
-        -1,
-    ).reshape(-1, 3)
-    return _clean(v, _grid_triangles(len(p), seg, wrap_rows=closed))
+    v = np.empty((len(p), seg, 3))
+    v[..., 0] = p[:, None, 0] * np.cos(th)[None]
+    v[..., 1] = p[:, None, 0] * np.sin(th)[None]
+    v[..., 2] = p[:, None, 1]
+    poles = (not closed and p[0, 0] == 0.0, not closed and p[-1, 0] == 0.0)
+    return v.reshape(-1, 3).astype(np.float32), _grid_triangles(len(p), seg, closed, *poles)
 
 
 def _arc(cr: float, cz: float, radius: float, a0: float, a1: float, n: int) -> list[tuple[float, float]]:
@@ -200,6 +219,15 @@ def _hull_points(vertices: np.ndarray, limit: int = _HULL_VERTS, rng: np.random.
         chosen.append(k)
         d = np.minimum(d, np.linalg.norm(v - v[k], axis=1))
     return v[chosen]
+
+
+def _ring_points(profile: Sequence[tuple[float, float]], seg: int | None = None) -> np.ndarray:
+    """Collision points of a solid of revolution: a coarse ring per (r, z) profile point."""
+    seg = seg or _HULL_SEG
+    th = np.linspace(0.0, 2 * np.pi, seg, endpoint=False)
+    # rings circumscribe the true circle so the coarse hull does not sink into the floor
+    k = 1.0 / math.cos(math.pi / seg)
+    return np.array([[r * k * math.cos(a), r * k * math.sin(a), z] for r, z in profile for a in th])
 
 
 def _centre(vertices: np.ndarray) -> np.ndarray:
@@ -276,7 +304,10 @@ def _cone(rng, largest, thin):
     r, h = diam / 2, height / 2
     top = r * rng.uniform(0.0, 0.6)  # 0: a sharp cone, else a frustum
     v, t = _revolve([(0, -h), (r, -h), (top, h), (0, h)])
-    return v, t, (Part("hull", points=_hull_points(v)),), {
+    pts = _ring_points([(r, -h), (top, h)] if top > 0 else [(r, -h)])
+    if top == 0:
+        pts = np.vstack([pts, [[0.0, 0.0, h]]])
+    return v, t, (Part("hull", points=pts),), {
         "diameter_m": round(diam, 5),
         "height_m": round(height, 5),
         "top_ratio": round(top / r, 4),
@@ -288,7 +319,9 @@ def _torus(rng, largest, thin):
     tube = rng.uniform(max(thin / 2, 0.15 * outer), 0.45 * outer)
     rc = outer - tube
     v, t = _revolve(_arc(rc, 0, tube, 0, 2 * np.pi, _RINGS + 2)[:-1], closed=True)
-    return v, t, (Part("hull", points=_hull_points(v)),), {"outer_diameter_m": round(largest, 5), "tube_radius_m": round(tube, 5)}
+    # The hull only needs the outer half of the tube profile.
+    pts = _ring_points(_arc(rc, 0, tube, -np.pi / 2, np.pi / 2, 5))
+    return v, t, (Part("hull", points=pts),), {"outer_diameter_m": round(largest, 5), "tube_radius_m": round(tube, 5)}
 
 
 def _tube(rng, largest, thin):
@@ -311,8 +344,14 @@ def _superquadric(rng, largest, thin):
     v = np.stack(
         [a[0] * _spow(ce, e1) * _spow(co, e2), a[1] * _spow(ce, e1) * _spow(so, e2), a[2] * _spow(se, e1)], -1
     ).reshape(-1, 3)
-    v, t = _clean(v, _grid_triangles(len(eta), len(om), wrap_rows=False))
-    return v, t, (Part("hull", points=_hull_points(v, 32)),), {
+    v, t = v.astype(np.float32), _grid_triangles(len(eta), len(om), False, True, True)
+    # Collision: the same surface on a coarse grid (poles once); MuJoCo takes its hull.
+    ce, om2 = np.linspace(-np.pi / 2, np.pi / 2, 7)[1:-1], np.linspace(-np.pi, np.pi, _HULL_SEG, endpoint=False)
+    e2g, o2g = np.meshgrid(ce, om2, indexing="ij")
+    c1, s1, c2, s2 = np.cos(e2g), np.sin(e2g), np.cos(o2g), np.sin(o2g)
+    pts = np.stack([a[0] * _spow(c1, e1) * _spow(c2, e2), a[1] * _spow(c1, e1) * _spow(s2, e2), a[2] * _spow(s1, e1)], -1)
+    pts = np.vstack([pts.reshape(-1, 3), [[0, 0, -a[2]], [0, 0, a[2]]]])
+    return v, t, (Part("hull", points=pts),), {
         "semi_axes_m": a.round(5).tolist(),
         "exponents": [round(float(e1), 4), round(float(e2), 4)],
     }
