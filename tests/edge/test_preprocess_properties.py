@@ -16,7 +16,9 @@ from hypothesis.extra import numpy as hnp
 from edge.preprocess import STD_FLOOR, padded_shape, preprocess, preprocess_batch, valid_mask
 
 INVALID_VALUES = np.array([0.0, -0.5, np.nan, np.inf, -np.inf, -1e-3], dtype=np.float32)
-SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# database=None: no .hypothesis folder in the repo; examples are derandomized for reproducible CI
+SETTINGS = settings(max_examples=100, deadline=None, database=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.too_slow])
 
 
 @st.composite
@@ -87,7 +89,7 @@ def test_camera_height_and_scale_do_not_matter(fd, offset, scale):
     np.testing.assert_allclose(b.x, a.x, atol=2e-4 * max(1.0, 5.0 / raw.std()))
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, database=None, derandomize=True)
 @given(st.lists(st.integers(0, 2**31 - 1), min_size=1, max_size=4), st.integers(1, 40), st.integers(1, 40))
 def test_batch_equals_frame_by_frame(seeds, h, w):
     fs = []
