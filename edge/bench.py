@@ -234,14 +234,16 @@ def bench_models(
     return results
 
 
-def export_random_model(encoder: str, out: Path, width: float = 1.0, single_channel: bool = False, int8: bool = False) -> Path:
+def export_random_model(
+    encoder: str, out: Path, width: float = 1.0, single_channel: bool = False, int8: bool = False, threads: int = 2
+) -> Path:
     """Export an untrained architecture with ``depthseg-export --random-init`` in a subprocess.
 
     A subprocess keeps torch out of the timing process (its threads and memory would skew the
     numbers, and the edge path must not import it).
     """
     cmd = [sys.executable, "-m", "export.cli", "--random-init", "--encoder", encoder, "--width", repr(float(width)),
-           "--out", str(out), "--check-frames", "2", "--json"]
+           "--out", str(out), "--check-frames", "2", "--threads", str(threads), "--json"]
     if single_channel:
         cmd.append("--single-channel")
     if int8:

@@ -110,7 +110,15 @@ def format_report(res: dict[str, Any]) -> str:
 
 
 def benchmark(args: argparse.Namespace) -> dict[str, Any]:
-    from edge.bench import ModelSpec, bench_models, cpu_info, export_random_model, peak_rss_mb, runtime_info, time_torch
+    from edge.bench import (
+        ModelSpec,
+        bench_models,
+        cpu_info,
+        export_random_model,
+        peak_rss_mb,
+        runtime_info,
+        time_torch,
+    )
     from edge.defaults import DEFAULT_ONNX
     from edge.sampleframes import sample_frames
 
@@ -129,7 +137,7 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
             except ValueError:
                 raise ConfigError(f"--compare {item}: width must be a number, e.g. vgg16:0.5") from None
             out = Path(td) / f"compare-{enc}-w{width:g}.onnx"
-            export_random_model(enc, out, width=width)
+            export_random_model(enc, out, width=width, threads=args.threads)
             specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=args.threads))
         bar = progress(total=args.runs, desc="bench")
         try:

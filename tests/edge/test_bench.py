@@ -1,0 +1,123 @@
+"""depthseg-bench: round-robin timing, report fields, torch-free, one-line errors (no timing asserts)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from infergen import TORCH_BLOCKER, linear_model, raw_model
+
+from edge.bench import ModelSpec, bench_models, cpu_info, stats
+from edge.bench_cli import main
+from edge.errors import ConfigError
+from edge.sampleframes import synthetic_frames
+
+REQUIRED = {"name", "p50_ms", "p90_ms", "p99_ms", "fps", "whole_frame_p50_ms"}
+
+
+@pytest.fixture(scope="module")
+def models(tmp_path_factory):
+    d = tmp_path_factory.mktemp("bench")
+    return linear_model(d / "plain.onnx"), raw_model(d / "raw.onnx")
+
+
+def test_stats_are_percentiles_of_the_runs():
+    s = stats(list(range(1, 101)))
+    assert s["min"] == 1 and s["max"] == 100 and s["mean"] == 50.5
+    assert s["p50"] == pytest.approx(50.5) and s["p90"] == pytest.approx(90.1) and s["p99"] == pytest.approx(99.01)
+
+
+def test_bench_models_interleaves_and_reports_every_stage(models):
+    plain, raw = models
+    specs = [ModelSpec(plain, threads=1), ModelSpec(raw, name="raw", threads=1)]
+    rounds = []
+    res = bench_models(specs, synthetic_frames(2).depth, runs=7, warmup=1, on_round=rounds.append)
+    assert rounds == list(range(7))
+    assert [r["name"] for r in res] == ["plain", "raw"]
+    for r in res:
+        assert REQUIRED <= set(r) and r["runs"] == 7 and r["threads"] == 1 and r["precision"] == "fp32"
+        t = r["timings"]
+        assert set(t) == {"whole", "pre", "infer", "post"}
+        for s in t.values():
+            assert s["min"] <= s["p50"] <= s["p90"] <= s["p99"] <= s["max"]
+        assert r["p50_ms"] == t["infer"]["p50"] and r["whole_frame_p50_ms"] == t["whole"]["p50"]
+        assert r["whole_frame_p50_ms"] >= t["infer"]["min"]  # the whole frame contains the inference
+        assert r["fps"] == pytest.approx(1000.0 / t["whole"]["mean"])
+        assert r["load_ms"] > 0 and r["first_run_ms"] > 0 and r["size_mb"] > 0
+    assert res[0]["ratio_to_first"] == 1.0
+    assert res[1]["ratio_to_first"] == pytest.approx(res[1]["whole_frame_p50_ms"] / res[0]["whole_frame_p50_ms"])
+    assert res[1]["graph"] == "with-preprocessing" and res[0]["graph"] == "logits"
+
+
+def test_bench_models_refuses_nothing_to_do(models):
+    with pytest.raises(ConfigError):
+        bench_models([], synthetic_frames(1).depth)
+    with pytest.raises(ConfigError):
+        bench_models([ModelSpec(models[0])], synthetic_frames(1).depth, runs=0)
+
+
+def test_cpu_info_names_the_cpu_and_its_isa():
+    info = cpu_info()
+    assert info["model"] and info["logical_cpus"] >= 1 and info["usable_cpus"] >= 1
+    assert isinstance(info["isa"], list)
+
+
+def test_cli_table_lists_every_model(models, capsys):
+    rc = main(["--model", str(models[0]), str(models[1]), "--threads", "1", "--runs", "3", "--warmup", "1", "--frames", "2"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "intra-op threads 1, inter-op 1, sequential" in out and "frame p50" in out and "x first" in out
+    assert "plain" in out and "raw" in out and "CPU:" in out
+
+
+def test_cli_json_where_torch_cannot_be_imported(models):
+    code = TORCH_BLOCKER + f"""
+from edge.bench_cli import main
+rc = main(["--model", {str(models[0])!r}, {str(models[1])!r}, "--threads", "1", "--runs", "4", "--warmup", "1", "--json"])
+assert not any(m == "torch" or m.startswith("torch.") for m in sys.modules), "torch was imported"
+sys.exit(rc)
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert [m["name"] for m in res["models"]] == ["plain", "raw"]
+    for m in res["models"]:
+        assert REQUIRED <= set(m) and all(np.isfinite(m[k]) and m[k] > 0 for k in REQUIRED - {"name"})
+    assert res["threads"] == 1 and res["inter_op_threads"] == 1 and res["runtime"]["onnxruntime"]
+    assert res["cpu"]["model"] and "synthetic" in res["frames"] and res["peak_rss_mb"] > 0
+
+
+@pytest.mark.parametrize("kind", ["missing", "corrupt"])
+def test_bad_model_is_one_line_and_nonzero(tmp_path, kind):
+    path = tmp_path / "m.onnx"
+    if kind == "corrupt":
+        path.write_bytes(b"definitely not onnx")
+    proc = subprocess.run([sys.executable, "-m", "edge.bench_cli", "--model", str(path), "--runs", "2"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    err = proc.stderr.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("depthseg-bench: error:") and "m.onnx" in err
+    assert "Traceback" not in err and proc.stdout == ""
+
+
+def test_torch_option_times_pytorch_eager_too(models, capsys):
+    pytest.importorskip("torch")
+    rc = main(["--model", str(models[0]), "--threads", "1", "--runs", "2", "--warmup", "1", "--torch", "--json"])
+    assert rc == 0
+    (m,) = json.loads(capsys.readouterr().out)["models"]
+    assert m["torch_whole_frame_p50_ms"] > 0 and m["torch_p50_ms"] > 0 and m["torch_threads"] == 1
+
+
+@pytest.mark.slow
+def test_compare_adds_a_random_init_architecture(models, capsys):
+    pytest.importorskip("torch")
+    rc = main(["--model", str(models[0]), "--compare", "vgg11_bn:0.125", "--threads", "1", "--runs", "2",
+               "--warmup", "1", "--json"])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(capsys.readouterr().out)
+    a, b = res["models"]
+    assert b["name"].startswith("vgg11_bn w0.125") and b["weights"] == "random-init" and b["in_channels"] == 3
+    assert b["ratio_to_first"] == pytest.approx(b["whole_frame_p50_ms"] / a["whole_frame_p50_ms"])
