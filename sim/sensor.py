@@ -53,7 +53,7 @@ class SensorConfig:
 
     # 2. amplitude
     albedo_floor: tuple[float, float] = (0.35, 0.85)  # NIR reflectance of the floor, per frame
-    albedo_object: tuple[float, float] = (0.2, 1.0)  # per object; dark objects get noisy (real capture)
+    albedo_object: tuple[float, float] = (0.1, 1.0)  # per object; dark objects get noisy, even holes (real capture)
     range_ref_m: float = 0.30  # amplitude reference distance (camera ~30 cm above the table)
     vignetting_power: float = 4.0  # |ray|^-4 (SENSOR.md step 2)
     cone_half_angle_deg: tuple[float, float] = (31.5, 33.0)  # corner cut-off, per frame (fitted, see above)
