@@ -53,9 +53,15 @@ def plan_shards(frames: int, shard_frames: int) -> list[tuple[int, int]]:
 _W: dict[str, Any] = {}
 
 
-def _init_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q) -> None:
+def _init_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q, pooled: bool = True) -> None:
     from sim.generate import SimConfig
     from sim.shapes import MeshLibrary
+
+    if pooled:
+        os.dup2(2, 1)  # native-library chatter in a worker goes to stderr: stdout is for --json
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
 
     _W["config"] = SimConfig.from_dict(config_dict)
     _W["seed"] = seed
@@ -150,7 +156,7 @@ def simulate(
     """Generate (or finish) a dataset; returns the summary. All validation raises ConfigError."""
     import multiprocessing as mp
 
-    from sim.generate import SimConfig
+    from sim.generate import FRAME_PERIOD_NS, SimConfig
     from sim.shapes import MeshLibrary
 
     if int(frames) < 1:
@@ -198,7 +204,7 @@ def simulate(
         "tool": PROG,
         **ident,
         "frames": int(frames),
-        "frame_period_ns": 22_222_222,
+        "frame_period_ns": FRAME_PERIOD_NS,
         "config": config.to_dict(),
         "objects_folder": None if objects is None else str(objects),
         "objects_skipped": skipped,
@@ -233,7 +239,7 @@ def simulate(
 
         try:
             if int(workers) == 1:  # in this process: no start-up cost for small runs and tests
-                _init_worker(config.to_dict(), int(seed), library_paths, str(out), q)
+                _init_worker(config.to_dict(), int(seed), library_paths, str(out), q, pooled=False)
                 for task in todo:
                     record(_write_shard(task))
             else:

@@ -8,7 +8,7 @@ sleep, which is exactly the "stop early once everything is at rest" we need.
 
 Guards from PITFALLS.md: a pile of meshes can make MuJoCo report "Nan, Inf or huge value in
 QACC"; it then resets the state, and a loop on ``data.time`` could run for minutes. So the
-step count is capped, ``mjWARN_BADQACC`` is checked while stepping, and a failed drop raises
+step count is capped, ``mjWARN_BADQACC`` (and BADQVEL, BADQPOS) is checked while stepping, and a failed drop raises
 `PhysicsUnstable`, which `sim.generate` answers by redrawing the scene from the same frame
 seed (deterministic: the redraw continues the frame's random stream).
 
@@ -137,12 +137,31 @@ def _build(scene: SceneSpec, cfg: PhysicsConfig):
 
 
 def drop(scene: SceneSpec, cfg: PhysicsConfig) -> DropResult:
-    """Simulate until every object rests (or the time cap); raise PhysicsUnstable on divergence."""
+    """Simulate until every object rests (or the time cap); raise PhysicsUnstable on divergence.
+
+    MuJoCo's own warning printer (it writes to stdout) is muted for the duration: the warning
+    counters are checked instead, and stdout stays clean for ``--json``.
+    """
     import mujoco
 
     n = len(scene.objects)
     if n == 0:
         return DropResult(np.zeros((0, 3)), np.zeros((0, 4)), 0, 0.0, True)
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(_mute)
+    try:
+        return _simulate(scene, cfg, n)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def _mute(message: str) -> None:
+    return None
+
+
+def _simulate(scene: SceneSpec, cfg: PhysicsConfig, n: int) -> DropResult:
+    import mujoco
+
     try:
         model, data = _build(scene, cfg)
     except ValueError as exc:  # MuJoCo compile errors (e.g. a degenerate hull)
@@ -151,7 +170,8 @@ def drop(scene: SceneSpec, cfg: PhysicsConfig) -> DropResult:
     top = max(float(o.pos[2]) for o in scene.objects)
     settle_from = math.sqrt(2.0 * max(top, 0.0) / 9.81)
     max_steps = int(math.ceil(cfg.max_time_s / cfg.timestep_s))
-    bad = mujoco.mjtWarning.mjWARN_BADQACC
+    w = mujoco.mjtWarning
+    bad = (w.mjWARN_BADQACC, w.mjWARN_BADQVEL, w.mjWARN_BADQPOS)
     still = 0
     steps = 0
     at_rest = False
@@ -159,8 +179,9 @@ def drop(scene: SceneSpec, cfg: PhysicsConfig) -> DropResult:
     while steps < max_steps:
         mujoco.mj_step(model, data, nstep=every)
         steps += every
-        if data.warning[bad].number > 0:
-            raise PhysicsUnstable(f"BADQACC after {steps} steps")
+        for b in bad:
+            if data.warning[b].number > 0:
+                raise PhysicsUnstable(f"{b.name} after {steps} steps")
         if data.time < settle_from:
             continue
         if data.ntree_awake == 0:

@@ -73,3 +73,23 @@ def test_unstable_drops_are_redrawn_deterministically(monkeypatch):
     c = gen.generate_frame(4, 9)
     assert c.scene["params"]["physics"]["fallback"] == "empty scene"
     assert c.label.sum() == 0 and c.scene["params"]["objects"] == []
+
+
+def test_real_divergence_is_caught_silently(monkeypatch, capfd):
+    import mujoco
+
+    from sim import physics
+
+    build = physics._build
+
+    def exploding(scene, cfg):
+        model, data = build(scene, cfg)
+        data.qvel[:] = 1e300  # MuJoCo flags this as unstable on the first step
+        return model, data
+
+    monkeypatch.setattr(physics, "_build", exploding)
+    scene = sample_scene(np.random.default_rng(2), SceneConfig(n_objects=(3, 3)))
+    with pytest.raises(PhysicsUnstable, match="mjWARN_BAD"):
+        drop(scene, PhysicsConfig())
+    assert capfd.readouterr().out == ""  # MuJoCo's warning printer was muted (stdout stays JSON-clean)
+    assert mujoco.get_mju_user_warning() is None  # and restored afterwards
