@@ -117,6 +117,8 @@ class _TopicInfo:
             return "image"
         if self.schema_name in CAMERA_INFO_TYPES:
             return "info"
+        if self.schema_name.endswith("CameraCalibration") and self.message_encoding in ("json", "protobuf"):
+            return "info"  # foxglove.CameraCalibration: K, D, width, height
         return "other"
 
     def describe(self) -> str:

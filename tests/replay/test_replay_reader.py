@@ -189,3 +189,32 @@ def test_data_section_crc_and_uncompressed_chunks_read_cleanly(tmp_path):
         w.finish()
     s = open_depth_stream(p)
     assert len(list(s)) == 5 and s.damage is None
+
+
+def test_foxglove_camera_calibration_json_is_used(tmp_path):
+    import json
+
+    from replaygen import write_foxglove
+
+    rec = write_foxglove(tmp_path / "f.mcap", n=2, fmt="json")
+    # append a foxglove.CameraCalibration channel to a copy of the recording
+    p = tmp_path / "cal.mcap"
+    with open(p, "wb") as fh:
+        w = Writer(fh)
+        w.start("", "test")
+        raw = w.register_schema("foxglove.RawImage", "jsonschema", b"{}")
+        cal = w.register_schema("foxglove.CameraCalibration", "jsonschema", b"{}")
+        ch_d = w.register_channel("/camera/depth", "json", raw)
+        ch_c = w.register_channel("/camera/calibration", "json", cal)
+        k = [210.0, 0, 16.0, 0, 212.0, 12.0, 0, 0, 1]
+        w.add_message(ch_c, 1, json.dumps({"width": 32, "height": 24, "K": k, "D": [0.1], "frame_id": "cam"}).encode(), 1)
+        from mcap.reader import make_reader
+
+        with open(rec.path, "rb") as src:
+            for _, _, m in make_reader(src).iter_messages(topics=["/camera/depth"]):
+                w.add_message(ch_d, m.log_time, m.data, m.publish_time)
+        w.finish()
+    s = open_depth_stream(p)
+    assert s.info_topic == "/camera/calibration"
+    assert (s.camera_info["fx"], s.camera_info["fy"], s.camera_info["cx"]) == (210.0, 212.0, 16.0)
+    assert [fr.info["d"] for fr in s] == [[0.1], [0.1]]
