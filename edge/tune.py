@@ -589,7 +589,7 @@ def plot_pr_curve(result: TuneResult, path: str | Path, title: str = "") -> Path
         ax.set_xlim(0, 1.01)
         ax.set_ylim(0, 1.01)
         ax.grid(alpha=0.3)
-        kind = "PSEUDO-LABELS" if result.pseudo_labels else "labels"
+        kind = "PSEUDO-LABELS" if result.pseudo_labels else "ground-truth labels"
         ax.set_title(title or f"depthseg-tune {result.objective.text} ({kind})", fontsize=10)
         ax.legend(loc="best", fontsize=8)
         fig.tight_layout()

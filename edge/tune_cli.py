@@ -132,7 +132,16 @@ def format_report(d: dict) -> str:
     lines.append(_fmt_point("before (0.5)", d["before"], d["metric"]))
     lines.append(_fmt_point("after (tuned)", d["after"], d["metric"]))
     gain = d["after"]["objective"] - d["before"]["objective"]
-    lines.append(f"{d['metric']}: {d['before']['objective']:.4f} -> {d['after']['objective']:.4f} ({gain:+.4f})")
+    if "meets_target" in d["after"]:
+        kind = d["objective"].split(">=")[0]
+        met = {True: "met", False: "NOT met"}
+        lines.append(
+            f"target {d['objective']}: {kind} {d['before'][kind]:.4f} at 0.5 ({met[d['before']['meets_target']]}), "
+            f"{d['after'][kind]:.4f} tuned ({met[d['after']['meets_target']]}); "
+            f"{d['metric']} {d['before']['objective']:.4f} -> {d['after']['objective']:.4f} ({gain:+.4f})"
+        )
+    else:
+        lines.append(f"{d['metric']}: {d['before']['objective']:.4f} -> {d['after']['objective']:.4f} ({gain:+.4f})")
     if "meets_target" in d["after"] and not d["after"]["meets_target"]:
         lines.append(f"note: the target {d['objective']} is met on the tuning frames but not on the held-out frames")
     if d.get("written"):
