@@ -17,6 +17,10 @@ parameter below says which fact of ``shared/SENSOR.md`` (or of the real capture 
 4. Mixed pixels: edge pixels are supersampled by the renderer; the samples' returns are summed
    as phasors at the 60.24 MHz modulation frequency, so a pixel straddling an edge reads a
    range between the two surfaces, pulled towards the brighter one (a flying pixel).
+   The complex return is then blurred with a small Gaussian point-spread function (lens blur
+   and Royale's spatial filter): in the real capture 46 % of the pixels within 2 px of a depth
+   step read in between the two sides, against 20 % with in-pixel supersampling alone; sigma
+   0.9 px gives 47 % on simulated frames, so sigma is drawn per frame from 0.7-1.1 px.
    Multipath: floor pixels near tall objects read long (or short) by up to ~1 cm, in proportion
    to the object height around them (a blurred height map).
 5. Invalid: amplitude below ``amplitude_min`` (the corners, dark or grazing surfaces), above
@@ -69,6 +73,7 @@ class SensorConfig:
     correlated: bool = True  # noise blurred 3x3, as after Royale's filter
     # 4. mixed pixels and multipath
     mixed_pixels: bool = True
+    psf_sigma_px: tuple[float, float] = (0.7, 1.1)  # per frame; lens blur + Royale's filter (fitted, see above)
     modulation_hz: float = 60.24e6  # MODE_5_45FPS_500 (SENSOR.md)
     multipath_gain: tuple[float, float] = (-0.03, 0.12)  # per frame: metres of bias per metre of nearby height
     multipath_radius_m: float = 0.04
@@ -96,6 +101,7 @@ class SensorConfig:
         check_number("sensor.amplitude_ref", self.amplitude_ref, 1e-6)
         check_range("sensor.noise_scale", self.noise_scale, 0.0, 100.0)
         check_number("sensor.smoothing", self.smoothing, 0.1, 100.0)
+        check_range("sensor.psf_sigma_px", self.psf_sigma_px, 0.0, 10.0)
         check_number("sensor.modulation_hz", self.modulation_hz, 1e5, 1e10)
         check_range("sensor.multipath_gain", self.multipath_gain, -10.0, 10.0)
         check_number("sensor.multipath_radius_m", self.multipath_radius_m, 0.0, 1.0)
@@ -120,6 +126,7 @@ class SensorConfig:
             sigma_ref_m=0.0,
             sigma_min_m=0.0,
             mixed_pixels=False,
+            psf_sigma_px=(0.0, 0.0),
             multipath_gain=(0.0, 0.0),
             amplitude_noise=0.0,
             amplitude_min=0.0,
@@ -142,6 +149,7 @@ class FrameDraw:
     noise_scale: float
     multipath_gain: float
     cone_half_angle_deg: float
+    psf_sigma_px: float = 0.0
 
     def to_params(self) -> dict[str, Any]:
         return {
@@ -151,6 +159,7 @@ class FrameDraw:
             "noise_scale": round(self.noise_scale, 5),
             "multipath_gain": round(self.multipath_gain, 5),
             "cone_half_angle_deg": round(self.cone_half_angle_deg, 4),
+            "psf_sigma_px": round(self.psf_sigma_px, 4),
         }
 
 
@@ -167,6 +176,7 @@ def draw_frame_params(rng: np.random.Generator, cfg: SensorConfig, n_objects: in
         noise_scale=_u(rng, cfg.noise_scale),
         multipath_gain=_u(rng, cfg.multipath_gain),
         cone_half_angle_deg=_u(rng, cfg.cone_half_angle_deg),
+        psf_sigma_px=_u(rng, cfg.psf_sigma_px),
     )
 
 
@@ -192,6 +202,26 @@ def _blur_wide(x: np.ndarray, radius_px: float) -> np.ndarray:
     k = max(int(round(radius_px / 4)) * 2 + 1, 1)
     small = cv2.blur(cv2.blur(small, (k, k)), (k, k))
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def _psf(r: np.ndarray, amp: np.ndarray, hit: np.ndarray, sigma_px: float, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """Blur the complex return A * exp(i k r) with a Gaussian point-spread function.
+
+    Neighbouring surfaces mix the way a ToF pixel mixes light: as phasors, weighted by their
+    amplitude, so a pixel next to an edge reads in between, pulled towards the brighter side.
+    Phases are taken relative to the median range, far from the 2.49 m wrap-around.
+    """
+    import cv2
+
+    r0 = float(np.median(r[hit][::7])) if hit.any() else 0.0
+    ph = k * (r - r0)
+    a = np.where(hit, amp, 0.0).astype(np.float32)
+    re = cv2.GaussianBlur((a * np.cos(ph)).astype(np.float32), (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+    im = cv2.GaussianBlur((a * np.sin(ph)).astype(np.float32), (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+    amp_b = np.hypot(re, im)
+    ok = hit & (amp_b > 0)
+    r_b = np.where(ok, r0 + np.arctan2(im, re) / k, r).astype(np.float32)
+    return r_b, np.where(hit, amp_b, amp).astype(np.float32)
 
 
 def _cone(grid: RayGrid, half_angle_deg: float, width_deg: float) -> np.ndarray:
@@ -248,6 +278,9 @@ def apply_sensor(
         radius_px = fx * cfg.multipath_radius_m / max(camera_height, 1e-3)
         bias = np.clip(draw.multipath_gain * _blur_wide(heights, radius_px), -cfg.multipath_max_m, cfg.multipath_max_m)
         r_meas = np.where(floor, r_meas + bias, r_meas)
+
+    if draw.psf_sigma_px > 0:
+        r_meas, amp = _psf(r_meas, amp, hit, draw.psf_sigma_px, 4.0 * math.pi * cfg.modulation_hz / _C)
 
     noise = rng.standard_normal((h, w), dtype=np.float32)
     if cfg.correlated:

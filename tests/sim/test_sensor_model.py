@@ -157,3 +157,24 @@ def test_same_generator_same_output():
     a = apply_sensor(rr, GRID, CAM.fx, 0.3, _draw(), SensorConfig(), np.random.default_rng(9))
     b = apply_sensor(rr, GRID, CAM.fx, 0.3, _draw(), SensorConfig(), np.random.default_rng(9))
     np.testing.assert_array_equal(a.depth, b.depth)
+
+
+def test_psf_mixes_returns_across_edges_weighted_by_amplitude():
+    z = np.full((H, W), 0.30)
+    ids = np.zeros((H, W))
+    z[:, 112:] = 0.25
+    ids[:, 112:] = 1
+    cfg = SensorConfig.ideal()
+    rr = _render(z, ids)
+    blurred = apply_sensor(rr, GRID, CAM.fx, 0.3, dataclasses.replace(_draw(0.5, [0.5]), psf_sigma_px=1.0), cfg,
+                           np.random.default_rng(0))
+    row = blurred.depth[85] * GRID.norm[85]  # range along one row
+    r_clean = rr.r[85]
+    near, far = 0.25 * GRID.norm[85, 110:114], 0.30 * GRID.norm[85, 110:114]
+    assert np.all((row[110:114] > near + 0.001) & (row[110:114] < far - 0.001))  # two pixels each side fly
+    np.testing.assert_allclose(row[:100], r_clean[:100], atol=2e-4)  # flat floor stays put
+    np.testing.assert_allclose(row[125:], r_clean[125:], atol=2e-4)
+    # a dark object loses the tug of war: the mixed pixels lean towards the bright floor
+    dark = apply_sensor(rr, GRID, CAM.fx, 0.3, dataclasses.replace(_draw(0.8, [0.1]), psf_sigma_px=1.0), cfg,
+                        np.random.default_rng(0))
+    assert np.all(dark.depth[85, 111:113] > blurred.depth[85, 111:113])
