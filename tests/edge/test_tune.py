@@ -499,3 +499,17 @@ def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
     from edge.checkpoint import read_checkpoint
 
     assert ModelMeta.from_dict(read_checkpoint(str(pt) + ".bak")["meta"]).threshold == 0.5
+
+
+def test_tuning_an_onnx_model_never_imports_torch(data_dir, tiny_onnx, tmp_path):
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\nfrom edge.tune_cli import main\n"
+        f"rc = main(['--model', {str(tiny_onnx)!r}, '--data', {str(data_dir / 'labelled.mcap')!r}, '--dry-run', '--json'])\n"
+        "print(rc, 'torch' in sys.modules)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "0 False"
