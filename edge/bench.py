@@ -141,7 +141,7 @@ def bench_models(
     frames: Sequence[np.ndarray],
     runs: int = 200,
     warmup: int = 20,
-    spin: bool = True,
+    spin: bool = False,
     on_round: Callable[[int], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Time every model on ``frames`` (cycled), interleaved round-robin; one result dict per model."""

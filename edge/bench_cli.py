@@ -49,8 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", type=Path, default=None, help="simulated MCAP file or directory to take frames from")
     p.add_argument("--frames", type=int, default=8, help="distinct frames, cycled through the runs (default 8)")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic frames (default 0)")
-    p.add_argument("--no-spin", action="store_true",
-                   help="let onnxruntime's worker threads sleep between kernels (less idle CPU burn, a little more latency)")
+    p.add_argument("--spin", action="store_true",
+                   help="let onnxruntime's worker threads busy-wait between kernels (off by default: on a CPU shared with "
+                        "other work it made frames 3-4x slower here)")
     p.add_argument("--torch", action="store_true", help="also time PyTorch eager for each model's architecture (imports torch)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     return p
@@ -95,7 +96,7 @@ def format_report(res: dict[str, Any]) -> str:
     cpu = res["cpu"]
     head = [
         f"onnxruntime {res['runtime']['onnxruntime']}, intra-op threads {res['threads']}, inter-op 1, sequential, "
-        f"spinning {'off' if res['no_spin'] else 'on'}",
+        f"thread spinning {'on' if res['spin'] else 'off'}",
         f"CPU: {cpu['model']} ({cpu['usable_cpus']} usable of {cpu['logical_cpus']} logical CPUs); ISA: {' '.join(cpu['isa'])}",
         f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin",
         "times in ms; 'inf' = session.run only; 'frame' = raw depth -> mask (pre + inf + post); fps = 1000 / mean frame ms; "
@@ -141,7 +142,7 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
             specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=args.threads))
         bar = progress(total=args.runs, desc="bench")
         try:
-            models = bench_models(specs, frames.depth, runs=args.runs, warmup=args.warmup, spin=not args.no_spin,
+            models = bench_models(specs, frames.depth, runs=args.runs, warmup=args.warmup, spin=args.spin,
                                   on_round=lambda _r: bar.update(1))
         finally:
             bar.close()
@@ -156,7 +157,7 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
         "runtime": runtime_info(),
         "threads": args.threads,
         "inter_op_threads": 1,
-        "no_spin": bool(args.no_spin),
+        "spin": bool(args.spin),
         "runs": args.runs,
         "warmup": args.warmup,
         "frames": frames.source,

@@ -67,7 +67,7 @@ def sigmoid(logits: np.ndarray) -> np.ndarray:
     return p
 
 
-def session_options(threads: int = 2, spin: bool = True, optimized_model_path: str | None = None):
+def session_options(threads: int = 2, spin: bool = False, optimized_model_path: str | None = None):
     """onnxruntime options for one edge session (see the module docstring for why)."""
     import onnxruntime as ort
 
@@ -78,7 +78,9 @@ def session_options(threads: int = 2, spin: bool = True, optimized_model_path: s
     so.inter_op_num_threads = 1
     so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    # Spinning keeps worker threads hot between kernels (lower latency, some idle CPU burn).
+    # Spinning keeps worker threads busy-waiting between kernels. On a CPU shared with other
+    # work (the robot's other nodes; here, training) it cost 3-4x in whole-frame latency
+    # (2.8 ms vs 10.3 ms p50, vgg11_bn w0.125, 2 threads), so it is off unless asked for.
     so.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
     so.log_severity_level = 3  # errors only: library code does not print
     if optimized_model_path:
@@ -95,7 +97,8 @@ class Segmenter:
     """Object/table segmentation of raw depth frames with an exported ONNX model.
 
     ``threshold`` overrides the one stored in the model (for experiments); ``spin`` lets
-    onnxruntime's worker threads busy-wait between kernels (lower latency, more CPU burnt).
+    onnxruntime's worker threads busy-wait between kernels: it can shave a little latency on
+    cores nobody else uses, and costs a lot on shared ones (see `session_options`).
     """
 
     def __init__(
@@ -104,7 +107,7 @@ class Segmenter:
         threads: int = 2,
         threshold: float | None = None,
         providers: Sequence[str] = ("CPUExecutionProvider",),
-        spin: bool = True,
+        spin: bool = False,
     ) -> None:
         import onnxruntime as ort
 

@@ -109,7 +109,7 @@ def _md(res: dict[str, Any], args: argparse.Namespace) -> str:
     by = {(m["arch"], m["in_channels"], m["precision"], m["threads"]): m for m in res["models"]}
     lines = [
         f"CPU: {cpu['model']} ({cpu['usable_cpus']} usable CPUs), ISA: {' '.join(cpu['isa'])}; onnxruntime "
-        f"{res['runtime']['onnxruntime']}, inter-op 1, sequential; Python {platform.python_version()}.",
+        f"{res['runtime']['onnxruntime']}, inter-op 1, sequential, thread spinning off; Python {platform.python_version()}.",
         f"Frames: {res['frames']}. {res['runs']} timed runs per cell after {res['warmup']} warm-up, all "
         f"{len(res['models'])} cells interleaved round-robin in one run.",
         "",
