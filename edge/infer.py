@@ -115,7 +115,11 @@ class Segmenter:
 
         path = Path(model_path) if model_path is not None else DEFAULT_ONNX
         if not path.exists():
-            hint = "export one with depthseg-export" if model_path is not None else "pass --model or rebuild it"
+            hint = (
+                "export one with depthseg-export"
+                if model_path is not None
+                else "pass --model, or export it: depthseg-export --single-channel --out edge/models/default.onnx"
+            )
             raise ModelError(f"{path}: no such model file; {hint}")
         if path.is_dir():
             raise ModelError(f"{path}: is a directory, expected an .onnx model file")
