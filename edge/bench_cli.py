@@ -30,7 +30,7 @@ examples:
   depthseg-bench --threads 2                                   # the shipped default model
   depthseg-bench --threads 2 --compare vgg16                   # ... against the paper's VGG16 FCN-8s
   depthseg-bench --model a.onnx b.onnx --runs 500 --json
-  depthseg-bench --model a.onnx --torch                        # also PyTorch eager (imports torch)
+  depthseg-bench --model a.onnx --torch                        # also PyTorch eager (imports torch; <= 50 runs)
 """
 
 
@@ -149,9 +149,9 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
         if args.torch:
             from edge.infer import Segmenter
 
-            for spec, m in zip(specs, models):
-                seg = Segmenter(spec.path, threads=args.threads)
-                m.update(time_torch(seg, frames.depth, runs=min(args.runs, 50), warmup=min(args.warmup, 5)))
+            segs = [Segmenter(spec.path, threads=args.threads) for spec in specs]
+            for m, t in zip(models, time_torch(segs, frames.depth, runs=min(args.runs, 50), warmup=max(3, min(args.warmup, 10)))):
+                m.update(t)
     return {
         "cpu": cpu_info(),
         "runtime": runtime_info(),
