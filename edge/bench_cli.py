@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.cliutil import print_json, progress, run
-from edge.errors import ConfigError
+from edge.errors import ConfigError, ModelError
 
 PROG = "depthseg-bench"
 
@@ -127,6 +127,11 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
         raise ConfigError(f"--threads must be >= 1, got {args.threads}")
     if args.frames < 1:
         raise ConfigError(f"--frames must be >= 1, got {args.frames}")
+    if not args.model and not DEFAULT_ONNX.exists():
+        raise ModelError(
+            f"{DEFAULT_ONNX}: the shipped default model is missing; pass --model M.onnx, or export it: "
+            "depthseg-export --single-channel --out edge/models/default.onnx"
+        )
     paths = args.model or [DEFAULT_ONNX]
     specs = [ModelSpec(p, threads=args.threads) for p in paths]
     frames = sample_frames(args.data, args.frames, args.seed)
