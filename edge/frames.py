@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
+from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from edge import rosmsg
@@ -189,6 +190,14 @@ def _decode_depth(msg_data: bytes, topic: str) -> np.ndarray:
     raise DataError(f"{topic}: pixel encoding '{img.encoding}' is not depth; expected 32FC1 or 16UC1")
 
 
+def _flush(group: dict[str, Any], t: int, info: dict[str, Any] | None, topic: str) -> Iterator[Frame]:
+    """The frame collected for log time ``t`` (if it had a depth image); empties ``group``."""
+    if "depth" in group:
+        yield Frame(depth=group["depth"], stamp_ns=int(t), label=group.get("label"), clean=group.get("clean"),
+                    info=info, scene=group.get("scene"), topic=topic)
+    group.clear()
+
+
 def iter_frames(
     path: str | Path,
     depth_topic: str | None = None,
@@ -200,46 +209,32 @@ def iter_frames(
     Simple reader for the depthseg layout and plain ROS 2 Image topics; `replay.reader`
     has the general one (foxglove images, damaged files, topic auto-detection).
     """
-    from mcap.reader import make_reader
-
     dt = depth_topic or TOPIC_DEPTH
     lt = labels_topic or TOPIC_LABELS
+    topics = [dt, lt, TOPIC_INFO, TOPIC_SCENE] + ([TOPIC_CLEAN] if with_clean else [])
     for f in list_mcap_files(path):
         with open(f, "rb") as fh:
-            reader = make_reader(fh)
-            topics = [dt, lt, TOPIC_INFO, TOPIC_SCENE] + ([TOPIC_CLEAN] if with_clean else [])
-            pending: dict[int, Frame] = {}
-            labels: dict[int, np.ndarray] = {}
             info = None
-            scene: dict[int, dict] = {}
-            clean: dict[int, np.ndarray] = {}
-            for _schema, channel, message in reader.iter_messages(topics=topics):
+            group: dict[str, Any] = {}
+            group_t: int | None = None
+
+            # All messages of one frame share its log time (the layout above), so a frame is
+            # complete as soon as a message with a later time arrives.
+            for _schema, channel, message in make_reader(fh).iter_messages(topics=topics):
                 t = message.log_time
+                if group_t is not None and t != group_t:
+                    yield from _flush(group, group_t, info, dt)
+                group_t = t
                 if channel.topic == TOPIC_INFO:
                     info = rosmsg.decode_camera_info(message.data)
                 elif channel.topic == TOPIC_SCENE:
-                    scene[t] = json.loads(message.data)
+                    group["scene"] = json.loads(message.data)
                 elif channel.topic == TOPIC_CLEAN:
-                    clean[t] = _decode_depth(message.data, channel.topic)
+                    group["clean"] = _decode_depth(message.data, channel.topic)
                 elif channel.topic == dt:
-                    for old in sorted(k for k in pending if k < t):
-                        yield pending.pop(old)
-                    pending[t] = Frame(depth=_decode_depth(message.data, dt), stamp_ns=t, info=info, topic=dt)
+                    group["depth"] = _decode_depth(message.data, dt)
                 elif channel.topic == lt:
                     img = rosmsg.decode_image(message.data, what=lt)
-                    labels[t] = (rosmsg.image_to_array(img, what=lt) > 0).astype(np.uint8)
-                for k in list(pending):
-                    fr = pending[k]
-                    if k in labels and (not with_clean or k in clean) and k in scene or (
-                        k in labels and (not with_clean or k in clean) and k < t
-                    ):
-                        fr.label = labels.pop(k)
-                        fr.scene = scene.pop(k, None)
-                        fr.clean = clean.pop(k, None)
-                        yield pending.pop(k)
-            for k in sorted(pending):
-                fr = pending.pop(k)
-                fr.label = labels.pop(k, None)
-                fr.scene = scene.pop(k, None)
-                fr.clean = clean.pop(k, None)
-                yield fr
+                    group["label"] = (rosmsg.image_to_array(img, what=lt) > 0).astype(np.uint8)
+            if group_t is not None:
+                yield from _flush(group, group_t, info, dt)

@@ -84,6 +84,10 @@ def main(argv: list[str] | None = None) -> int:
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
         )
+        from edge.encoders import list_encoders
+
+        if args.encoder not in list_encoders():
+            raise ConfigError(f"unknown encoder '{args.encoder}'; valid encoders: {', '.join(list_encoders())}")
         meta = ModelMeta(encoder=args.encoder, width=args.width, in_channels=args.in_channels,
                          batch_norm=args.batch_norm, extra_skip=args.extra_skip)
         with progress(desc="loading frames", unit="frame") as bar:

@@ -1,0 +1,124 @@
+"""Training: a tiny run lowers the loss, resume continues where it stopped, bad input is one line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from edge.checkpoint import load_checkpoint, read_checkpoint
+from edge.data import FrameSet, make_batch, split_indices
+from edge.errors import ConfigError, ModelError
+from edge.meta import ModelMeta
+from edge.train import TrainConfig, masked_bce, train
+from edge.train_cli import main as train_main
+
+META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True)
+
+
+def _frames(n: int = 24, seed: int = 0) -> FrameSet:
+    """Tilted floor with raised boxes (label 1) and dead corners, 40 x 56 (padded to 64 x 64)."""
+    rng = np.random.default_rng(seed)
+    h, w = 40, 56
+    yy, xx = np.mgrid[0:h, 0:w]
+    depths, labels = [], []
+    for _ in range(n):
+        d = 0.30 + 0.0005 * xx + rng.normal(0, 0.001, (h, w))
+        lab = np.zeros((h, w), np.uint8)
+        for _k in range(rng.integers(1, 3)):
+            y, x = rng.integers(0, h - 12), rng.integers(0, w - 12)
+            d[y : y + 10, x : x + 10] -= 0.05
+            lab[y : y + 10, x : x + 10] = 1
+        d[:3, :3] = 0.0
+        depths.append(d.astype(np.float32))
+        labels.append(lab)
+    return FrameSet(np.stack(depths), np.stack(labels))
+
+
+def test_masked_bce_ignores_masked_pixels() -> None:
+    logits = torch.tensor([[[[10.0, -10.0]]]])
+    target = torch.tensor([[[[1.0, 1.0]]]])
+    only_first = masked_bce(logits, target, torch.tensor([[[[1.0, 0.0]]]]))
+    assert float(only_first) < 1e-3  # the badly wrong second pixel is masked out
+    both = masked_bce(logits, target, torch.ones_like(target))
+    assert float(both) > 4.0
+
+
+def test_make_batch_masks_padding_and_invalid_pixels() -> None:
+    fs = _frames(2)
+    x, t, m = make_batch(fs, np.array([0, 1]), channels=3, multiple=32)
+    assert x.shape == (2, 3, 64, 64) and t.shape == m.shape == (2, 1, 64, 64)
+    assert m[:, :, 40:, :].sum() == 0 and m[:, :, :, 56:].sum() == 0  # padding never reaches the loss
+    assert m[0, 0, 0, 0] == 0  # dead corner pixel excluded
+    assert np.array_equal(x[:, 0], x[:, 1])  # replicated channels
+
+
+def test_tiny_training_lowers_the_loss(tmp_path) -> None:
+    fs = _frames(32)
+    cfg = TrainConfig(epochs=4, batch_size=8, lr=1e-2, patience=10, seed=0, threads=1)
+    res = train(META, fs.subset(np.arange(24)), fs.subset(np.arange(24, 32)), tmp_path, cfg)
+    losses = [h["val_loss"] for h in res.history]
+    assert len(losses) == 4
+    assert min(losses[1:]) < losses[0]
+    assert res.history[-1]["train_loss"] < res.history[0]["train_loss"]
+    model, meta, blob = load_checkpoint(tmp_path / "best.pt")
+    assert blob["epoch"] == res.best_epoch
+    assert meta.training["epochs_run"] == 4 and meta.params > 0
+    assert (tmp_path / "log.csv").read_text().count("\n") == 5
+    assert (tmp_path / "loss.png").stat().st_size > 1000
+
+
+def test_resume_continues_from_the_last_epoch(tmp_path) -> None:
+    fs = _frames(16)
+    tr, va = fs.subset(np.arange(12)), fs.subset(np.arange(12, 16))
+    train(META, tr, va, tmp_path, TrainConfig(epochs=2, batch_size=8, seed=0, threads=1))
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 1
+    res = train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=8, seed=0, threads=1), resume=True)
+    assert [h["epoch"] for h in res.history] == [0, 1, 2]
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 2
+    with pytest.raises(ConfigError, match="width"):
+        train(META.with_(width=0.25), tr, va, tmp_path, TrainConfig(epochs=4, threads=1), resume=True)
+
+
+def test_resume_without_checkpoint_is_a_clear_error(tmp_path) -> None:
+    fs = _frames(6)
+    with pytest.raises(ModelError, match="nothing to resume"):
+        train(META, fs, fs, tmp_path / "new", TrainConfig(epochs=1, threads=1), resume=True)
+
+
+def test_split_is_deterministic_and_disjoint() -> None:
+    a = split_indices(100, (0.7, 0.2, 0.1), seed=3)
+    b = split_indices(100, (0.7, 0.2, 0.1), seed=3)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert [len(x) for x in a] == [70, 20, 10]
+    assert len(set(np.concatenate(a).tolist())) == 100
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["--data", "/nonexistent/dir", "--out", "OUT"], "no such file or directory"),
+        (["--out", "OUT"], "give either --data"),
+        (["--data", "x", "--out", "OUT", "--split", "0.5,0.5"], "--split"),
+        (["--data", "x", "--out", "OUT", "--epochs", "0"], "epochs"),
+        (["--data", "x", "--out", "OUT", "--encoder", "resnet"], "unknown encoder"),
+    ],
+)
+def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    if "x" in argv:
+        _write_tiny_mcap(tmp_path / "x")
+    rc = train_main(argv)
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert "\n" not in err and needle in err and "Traceback" not in err
+
+
+def _write_tiny_mcap(d) -> None:
+    from edge.frames import FrameWriter
+
+    d.mkdir()
+    fs = _frames(4)
+    with FrameWriter(d / "a.mcap") as w:
+        for i in range(len(fs)):
+            w.write(i * 1000, fs.depth[i], fs.label[i])
