@@ -25,7 +25,7 @@ import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
-from edge.preprocess import preprocess, preprocess_batch
+from edge.preprocess import preprocess, preprocess_batch, valid_mask
 
 __all__ = [
     "Prediction",
@@ -232,8 +232,7 @@ class Segmenter:
             if len(outs) > 1:
                 valid = outs[1][0].astype(bool, copy=False)
             else:
-                with np.errstate(invalid="ignore"):
-                    valid = np.isfinite(d) & (d > 0)
+                valid = valid_mask(d)
         else:
             pre = preprocess(d, self.meta.in_channels, self.meta.pad_multiple)
             valid = pre.valid

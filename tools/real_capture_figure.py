@@ -27,7 +27,7 @@ from edge.baseline import PlaneBaseline, intrinsics_for  # noqa: E402
 from edge.cliutil import print_json, run  # noqa: E402
 from edge.frames import atomic_path  # noqa: E402
 from edge.infer import Segmenter  # noqa: E402
-from edge.preprocess import preprocess  # noqa: E402
+from edge.preprocess import preprocess, valid_mask  # noqa: E402
 from sim.importers import fit_intrinsics, read_ply  # noqa: E402
 
 PROG = "real_capture_figure"
@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         cap = read_ply(args.ply)
         depth = cap.depth
         seg = Segmenter(args.model, threads=2)
-        valid = np.isfinite(depth) & (depth > 0)
+        valid = valid_mask(depth)
         logits = seg.logits(depth)
         prob = 1.0 / (1.0 + np.exp(-np.clip(logits, -80, 80)))
         (fx, fy, cx, cy), _rms = fit_intrinsics(cap.points, cap.valid)

@@ -33,6 +33,7 @@ import numpy as np  # noqa: E402
 from edge.cliutil import print_json, run  # noqa: E402
 from edge.errors import ConfigError, DataError  # noqa: E402
 from edge.frames import atomic_path  # noqa: E402
+from edge.preprocess import valid_mask  # noqa: E402
 from sim.realism import CORNERS, Realism, flying_pixels, invalid_regions, realism  # noqa: E402
 
 PROG = "sim_vs_real"
@@ -115,7 +116,7 @@ def table(real: dict[str, float], shown: dict[str, float], shown_index: int, man
 def _panel(depth: np.ndarray, lo: float, hi: float) -> np.ndarray:
     import matplotlib
 
-    valid = np.isfinite(depth) & (depth > 0)
+    valid = valid_mask(depth)
     t = np.clip((hi - np.where(valid, depth, hi)) / (hi - lo), 0, 1)
     rgb = matplotlib.colormaps["viridis"](t)[..., :3]
     rgb[~valid] = 0.0
@@ -123,7 +124,7 @@ def _panel(depth: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 
 def _regions_panel(depth: np.ndarray) -> np.ndarray:
-    valid = np.isfinite(depth) & (depth > 0)
+    valid = valid_mask(depth)
     d = np.where(valid, depth, np.nan)
     grey = np.clip((np.nanmax(d) - np.nan_to_num(d, nan=np.nanmax(d))) / max(np.nanmax(d) - np.nanmin(d), 1e-6), 0, 1)
     rgb = np.repeat((0.25 + 0.5 * grey)[..., None], 3, axis=2)
