@@ -11,14 +11,13 @@ Written atomically (temp file + rename), so an interrupted save never destroys t
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from edge.errors import ModelError
-from edge.frames import atomic_path
+from edge.frames import atomic_write
 from edge.meta import ModelMeta
 from edge.model import FCN8s, build_model, count_parameters
 
@@ -33,12 +32,8 @@ def save_checkpoint(path: str | Path, model: FCN8s, meta: ModelMeta, **extra: An
     meta = meta.with_(params=count_parameters(model))
     blob = {"format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(), "state_dict": model.state_dict()}
     blob.update(extra)
-    tmp = atomic_path(path)
-    try:
+    with atomic_write(path) as tmp:
         torch.save(blob, tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path
 
 

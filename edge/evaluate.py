@@ -16,7 +16,6 @@ panel shows its prediction in the same colours.
 from __future__ import annotations
 
 import heapq
-import os
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,7 +25,7 @@ import numpy as np
 
 from edge.baseline import PlaneBaseline, intrinsics_for
 from edge.errors import ConfigError, DataError, ModelError
-from edge.frames import Frame, atomic_path
+from edge.frames import Frame, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.metrics import MetricAccumulator, MetricSummary, confusion, frame_scores, threshold_logit
 from edge.predict import Predictor
@@ -157,13 +156,7 @@ def _write_png(path: Path, rgb: np.ndarray) -> Path:
     ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]))
     if not ok:  # pragma: no cover - cv2 fails only on absurd inputs
         raise DataError(f"{path}: could not encode the figure as PNG")
-    tmp = atomic_path(path)
-    try:
-        tmp.write_bytes(buf.tobytes())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    return write_bytes_atomic(path, buf.tobytes())
 
 
 def evaluate(

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -37,6 +38,8 @@ __all__ = [
     "FrameWriter",
     "list_mcap_files",
     "atomic_path",
+    "atomic_write",
+    "write_bytes_atomic",
 ]
 
 TOPIC_DEPTH = "/pico_flexx/image_depth"
@@ -72,6 +75,28 @@ class Frame:
 def atomic_path(path: Path) -> Path:
     """Temporary sibling of ``path``: write there, then ``os.replace`` it into place."""
     return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+@contextmanager
+def atomic_write(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path to write; it replaces ``path`` only if the block succeeds.
+
+    Why: an interrupted write must never destroy what was there before (a checkpoint, a model,
+    a figure), and a reader must never see half a file under the final name.
+    """
+    path = Path(path)
+    tmp = atomic_path(path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    with atomic_write(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
 
 
 class FrameWriter:

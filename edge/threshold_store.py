@@ -15,12 +15,11 @@ file appears under its final name only when complete (temp file + rename).
 
 from __future__ import annotations
 
-import os
 import shutil
 from pathlib import Path
 
 from edge.errors import ModelError
-from edge.frames import atomic_path
+from edge.frames import atomic_write
 from edge.meta import META_KEY, ModelMeta
 
 __all__ = ["store_threshold", "read_meta", "backup_path"]
@@ -76,14 +75,10 @@ def _write_onnx(src: Path, dst: Path, threshold: float, policy: str) -> ModelMet
     del model.metadata_props[:]
     for k in props:  # keep the original key order, new keys last
         model.metadata_props.append(onnx.StringStringEntryProto(key=k, value=props[k]))
-    tmp = atomic_path(dst)
-    try:
-        # External weights (if any) were loaded above and are written back inline: a model that
-        # fits in one protobuf (< 2 GB; ours is ~0.5 GB at full width) stays one self-contained file.
+    # External weights (if any) were loaded above and are written back inline: a model that
+    # fits in one protobuf (< 2 GB; ours is ~0.5 GB at full width) stays one self-contained file.
+    with atomic_write(dst) as tmp:
         onnx.save(model, str(tmp))
-        os.replace(tmp, dst)
-    finally:
-        tmp.unlink(missing_ok=True)
     return meta
 
 
@@ -95,22 +90,14 @@ def _write_checkpoint(src: Path, dst: Path, threshold: float, policy: str) -> Mo
     blob = read_checkpoint(src)
     meta = ModelMeta.from_dict(blob["meta"]).with_(threshold=float(threshold), threshold_policy=policy)
     blob["meta"] = meta.to_dict()
-    tmp = atomic_path(dst)
-    try:
+    with atomic_write(dst) as tmp:
         torch.save(blob, tmp)
-        os.replace(tmp, dst)
-    finally:
-        tmp.unlink(missing_ok=True)
     return meta
 
 
 def _copy_atomic(src: Path, dst: Path) -> None:
-    tmp = atomic_path(dst)
-    try:
+    with atomic_write(dst) as tmp:
         shutil.copy2(src, tmp)
-        os.replace(tmp, dst)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def store_threshold(

@@ -13,7 +13,6 @@ frame index, object-pixel fraction (or "no labels") and invalid-pixel fraction.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Iterable
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from edge.cliutil import run  # noqa: E402
 from edge.errors import ConfigError, DataError  # noqa: E402
-from edge.frames import Frame, atomic_path, iter_frames  # noqa: E402
+from edge.frames import Frame, iter_frames, write_bytes_atomic  # noqa: E402
 from edge.preprocess import valid_mask  # noqa: E402
 
 PROG = "contact_sheet"
@@ -95,13 +94,7 @@ def write_png(img: np.ndarray, out: str | Path) -> Path:
     ok, buf = cv2.imencode(".png", img, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:  # pragma: no cover - opencv failure
         raise DataError(f"{o}: PNG encoding failed")
-    tmp = atomic_path(o)
-    try:
-        tmp.write_bytes(buf.tobytes())
-        os.replace(tmp, o)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return o
+    return write_bytes_atomic(o, buf.tobytes())
 
 
 def pick_frames(path: str | Path, n: int, stride: int = 1, depth_topic: str | None = None):
