@@ -15,7 +15,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -29,7 +28,7 @@ from torch import nn
 from edge.checkpoint import read_checkpoint, save_checkpoint
 from edge.data import FrameSet, make_batch
 from edge.errors import ConfigError, ModelError
-from edge.frames import atomic_path
+from edge.frames import atomic_write, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
@@ -107,9 +106,7 @@ def _write_csv(path: Path, history: list[dict[str, Any]]) -> None:
     w.writeheader()
     for row in history:
         w.writerow(row)
-    tmp = atomic_path(path)
-    tmp.write_text(buf.getvalue())
-    os.replace(tmp, path)
+    write_bytes_atomic(path, buf.getvalue().encode())
 
 
 def plot_losses(history: list[dict[str, Any]], batch_losses: list[float], out: Path) -> None:
@@ -134,10 +131,9 @@ def plot_losses(history: list[dict[str, Any]], batch_losses: list[float], out: P
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    tmp = atomic_path(out)
-    fig.savefig(tmp, format="png", dpi=110)
+    with atomic_write(out) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
     plt.close(fig)
-    os.replace(tmp, out)
 
 
 def train(
