@@ -239,8 +239,15 @@ class Segmenter:
             t1 = time.perf_counter()
             out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]
             t2 = time.perf_counter()
-            prob = sigmoid(out[0, 0, :h, :w])
-        mask = (prob >= self.threshold).view(np.uint8)
+            logits = out[0, 0, :h, :w]
+            prob = sigmoid(logits)
+        if self.with_preprocessing:
+            mask = (prob >= self.threshold).view(np.uint8)
+        else:
+            # Compare logits, as depthseg-eval and depthseg-tune do: float32 probabilities cannot
+            # separate thresholds near 1 (the paper's 0.9999), logits can.
+            thr = float(np.log(self.threshold) - np.log1p(-self.threshold))
+            mask = (logits >= thr).view(np.uint8)
         mask[~valid] = UNKNOWN
         t3 = time.perf_counter()
         timings = {
