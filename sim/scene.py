@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError
-from sim.shapes import PROCEDURAL_KINDS, MeshLibrary, Shape, random_procedural
+from sim.shapes import PROCEDURAL_KINDS, THIN_KINDS, MeshLibrary, Shape, random_procedural, random_thin
 
 __all__ = [
     "SceneConfig",
@@ -195,6 +195,10 @@ class SceneConfig:
     shape_weights: tuple[float, ...] = field(default_factory=lambda: tuple(DEFAULT_WEIGHTS[k] for k in PROCEDURAL_KINDS))
     library_fraction: float = 1.0  # share of objects taken from --objects when a library is given
     density_kg_m3: tuple[float, float] = (200.0, 1200.0)
+    # Scene families where a floor-plane fit fails (all off by default; see _FAMILY_DEFAULTS).
+    thin_fraction: float = 0.0  # share of objects drawn flat (coins, plates, rings, flat tools)
+    thin_thickness_m: tuple[float, float] = (0.003, 0.008)  # their thickness; ignores min_thickness_m
+    thin_shapes: tuple[str, ...] = THIN_KINDS
 
     def __post_init__(self) -> None:
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
@@ -237,13 +241,38 @@ class SceneConfig:
             raise ConfigError(f"scene.shape_weights must be non-negative with a positive sum, got {list(self.shape_weights)}")
         check_number("scene.library_fraction", self.library_fraction, 0.0, 1.0)
         check_range("scene.density_kg_m3", self.density_kg_m3, 1.0, 1e5)
+        self._check_families()
+
+    def _check_families(self) -> None:
+        """Validate the plane-fit-failure families (thin objects, table edge, curvature, trays)."""
+        check_number("scene.thin_fraction", self.thin_fraction, 0.0, 1.0)
+        check_range("scene.thin_thickness_m", self.thin_thickness_m, 1e-4, 0.05)
+        if self.thin_thickness_m[1] > self.largest_dim_m[0]:
+            raise ConfigError(
+                f"scene.thin_thickness_m max {self.thin_thickness_m[1]} is above the smallest largest_dim_m "
+                f"{self.largest_dim_m[0]}; lower it"
+            )
+        bad = [s for s in self.thin_shapes if s not in THIN_KINDS]
+        if not self.thin_shapes or bad:
+            raise ConfigError(f"scene.thin_shapes: unknown {bad or 'empty list'}; choose from {list(THIN_KINDS)}")
 
     def to_dict(self) -> dict[str, Any]:
-        return _to_dict(self)
+        """Family keys at their defaults are left out, so old configs keep their digest."""
+        d = _to_dict(self)
+        for k, v in _FAMILY_DEFAULTS.items():
+            if d[k] == v:
+                del d[k]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> SceneConfig:
         return config_from_dict(cls, d, "scene")
+
+
+_FAMILY_DEFAULTS = {
+    k: (list(v) if isinstance(v, tuple) else v)
+    for k, v in {"thin_fraction": 0.0, "thin_thickness_m": (0.003, 0.008), "thin_shapes": THIN_KINDS}.items()
+}
 
 
 # --------------------------------------------------------------------------- sampled scenes
@@ -304,11 +333,37 @@ def _u(rng: np.random.Generator, r: tuple[float, float]) -> float:
     return float(rng.uniform(r[0], r[1])) if r[1] > r[0] else float(r[0])
 
 
+_THIN_TILT_RAD = 0.25  # thin objects are released nearly flat so they settle flat
+
+
+def _thin_object(rng: np.random.Generator, cfg: SceneConfig, k: int) -> ObjectSpec:
+    """A flat object released nearly level in slot k (thin objects take the lowest slots)."""
+    shape = random_thin(rng, _u(rng, cfg.largest_dim_m), _u(rng, cfg.thin_thickness_m), cfg.thin_shapes)
+    euler = (
+        float(rng.uniform(-_THIN_TILT_RAD, _THIN_TILT_RAD)),
+        float(rng.uniform(-_THIN_TILT_RAD, _THIN_TILT_RAD)),
+        float(rng.uniform(-_PI, _PI)),
+    )
+    q = euler_to_quat(*euler)
+    lowest = float((shape.vertices.astype(np.float64) @ quat_to_matrix(q)[2]).min())
+    z = k * cfg.drop_step_m + cfg.drop_clearance_m - lowest
+    pos = np.array([_u(rng, cfg.object_xy_m), _u(rng, cfg.object_xy_m), z])
+    return ObjectSpec(shape, pos, q, _u(rng, cfg.density_kg_m3), euler)
+
+
 def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrary | None = None) -> SceneSpec:
-    """Draw one scene; objects are stacked in release order k at k * drop_step above the floor."""
+    """Draw one scene; objects are stacked in release order k at k * drop_step above the floor.
+
+    Family draws happen only when their family is enabled, so the default configuration keeps
+    its random stream (and its frames) unchanged.
+    """
     n = int(rng.integers(int(cfg.n_objects[0]), int(cfg.n_objects[1]) + 1))
+    n_thin = int(rng.binomial(n, cfg.thin_fraction)) if cfg.thin_fraction > 0 else 0
     objects: list[ObjectSpec] = []
     for k in range(n):
+        if k < n_thin:
+            objects.append(_thin_object(rng, cfg, k))
+            continue
         largest = _u(rng, cfg.largest_dim_m)
         if library is not None and len(library) and rng.random() < cfg.library_fraction:
             shape = library.shape(int(rng.integers(len(library))), largest, cfg.min_thickness_m)

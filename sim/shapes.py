@@ -34,11 +34,14 @@ from edge.errors import ConfigError, DataError
 
 __all__ = [
     "PROCEDURAL_KINDS",
+    "THIN_KINDS",
     "MESH_SUFFIXES",
     "Part",
     "Shape",
     "make_shape",
     "random_procedural",
+    "make_thin_shape",
+    "random_thin",
     "fit_mesh",
     "MeshLibrary",
 ]
@@ -57,6 +60,9 @@ PROCEDURAL_KINDS = (
     "union",
 )
 MESH_SUFFIXES = (".obj", ".stl", ".off", ".ply")
+# Thin objects (scene.thin_fraction): flat things a floor-plane fit swallows. They ignore the
+# minimum thickness on purpose; their thickness comes from scene.thin_thickness_m.
+THIN_KINDS = ("disc", "plate", "ring", "bar", "lshape")
 
 # Render mesh resolution: enough for 1-2 px accuracy at 20 cm, small enough for a fast BVH.
 _SEG = 24  # segments around an axis of revolution
@@ -438,6 +444,87 @@ def random_procedural(
 ) -> Shape:
     p = None if weights is None else np.asarray(weights, float) / float(np.sum(weights))
     return make_shape(str(kinds[int(rng.choice(len(kinds), p=p))]), rng, largest, thin)
+
+
+# --------------------------------------------------------------------------- thin shapes
+
+
+def _zquat(a: float) -> tuple[float, float, float, float]:
+    return (math.cos(a / 2), 0.0, 0.0, math.sin(a / 2))
+
+
+def _disc(rng, largest, thick):
+    """A coin / lid: collides as a native cylinder, flat faces along body z."""
+    r, h = largest / 2, thick / 2
+    v, t = _revolve([(0, -h), (r, -h), (r, h), (0, h)])
+    return v, t, (Part("cylinder", (r, h)),), {"diameter_m": round(largest, 5)}
+
+
+def _plate(rng, largest, thick):
+    """A card / lid / cutting board: a thin box."""
+    d = np.array([largest, rng.uniform(0.4, 1.0) * largest, thick])
+    v, t = _box_mesh(d / 2)
+    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+
+
+def _ring_shape(rng, largest, thick, seg: int = 8):
+    """A washer / flat ring: collides as ``seg`` boxes so other objects can fall into the hole."""
+    ro, h = largest / 2, thick / 2
+    ri = ro * rng.uniform(0.45, 0.85)
+    v, t = _revolve([(ri, -h), (ro, -h), (ro, h), (ri, h)], closed=True)
+    rm, half_w = (ro + ri) / 2, (ro - ri) / 2
+    half_l = rm * math.tan(math.pi / seg) + half_w * 0.5  # segments overlap at the joints
+    parts = tuple(
+        Part("box", (half_w, half_l, h), (rm * math.cos(a), rm * math.sin(a), 0.0), _zquat(a))
+        for a in np.linspace(0.0, 2 * np.pi, seg, endpoint=False)
+    )
+    return v, t, parts, {"outer_diameter_m": round(largest, 5), "inner_ratio": round(ri / ro, 4)}
+
+
+def _bar(rng, largest, thick):
+    """A ruler / spatula / flat tool: long and narrow."""
+    d = np.array([largest, max(rng.uniform(0.08, 0.25) * largest, thick), thick])
+    v, t = _box_mesh(d / 2)
+    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+
+
+def _lshape(rng, largest, thick):
+    """An L-square / bracket: two flat bars at a right angle, centred on their bounding box."""
+    a, b = largest, rng.uniform(0.4, 0.9) * largest
+    w = max(rng.uniform(0.12, 0.3) * largest, thick)
+    boxes = [(np.array([a / 2, w / 2, 0.0]), np.array([a, w, thick]) / 2),
+             (np.array([w / 2, b / 2, 0.0]), np.array([w, b, thick]) / 2)]
+    centre = np.array([a / 2, b / 2, 0.0])
+    verts, tris, parts = [], [], []
+    for k, (c, half) in enumerate(boxes):
+        bv, bt = _box_mesh(half)
+        verts.append(bv.astype(np.float64) + c - centre)
+        tris.append(bt + 8 * k)
+        parts.append(Part("box", tuple(half), tuple(c - centre)))
+    v = np.concatenate(verts).astype(np.float32)
+    return v, np.concatenate(tris).astype(np.int32), tuple(parts), {"arms_m": [round(a, 5), round(float(b), 5)], "width_m": round(float(w), 5)}
+
+
+_THIN_GENERATORS: dict[str, Callable] = {
+    "disc": _disc,
+    "plate": _plate,
+    "ring": _ring_shape,
+    "bar": _bar,
+    "lshape": _lshape,
+}
+
+
+def make_thin_shape(kind: str, rng: np.random.Generator, largest: float, thickness: float) -> Shape:
+    """A flat shape of ``kind``: largest side ``largest``, flat along body z with ``thickness``."""
+    if kind not in _THIN_GENERATORS:
+        raise ConfigError(f"unknown thin shape '{kind}'; choose from {list(THIN_KINDS)}")
+    v, t, parts, params = _THIN_GENERATORS[kind](rng, float(largest), float(thickness))
+    info = {"largest_m": round(float(largest), 5), "thickness_m": round(float(thickness), 5), "thin": True, **params}
+    return Shape(kind, np.asarray(v, np.float32), np.asarray(t, np.int32), tuple(parts), info)
+
+
+def random_thin(rng: np.random.Generator, largest: float, thickness: float, kinds: Sequence[str]) -> Shape:
+    return make_thin_shape(str(kinds[int(rng.integers(len(kinds)))]), rng, largest, thickness)
 
 
 # --------------------------------------------------------------------------- mesh library

@@ -1,0 +1,87 @@
+"""Scene families where a floor-plane fit fails: thin objects, table edges, curved supports,
+trays. Each is off by default (default frames unchanged) and validated like the other keys."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from edge.errors import ConfigError
+from sim.generate import SimConfig, generate_frame
+from sim.render import ray_grid
+from sim.scene import SceneConfig, camera_rotation, quat_to_matrix, sample_scene
+from sim.shapes import THIN_KINDS, make_thin_shape
+
+FAMILIES = Path(__file__).resolve().parents[2] / "tools" / "scene_families"
+
+
+def _world_z(f, cfg: SimConfig) -> np.ndarray:
+    """World height of every pixel's clean hit (from the recorded camera pose)."""
+    cam = f.scene["params"]["camera"]
+    r_wc = camera_rotation(cam["yaw_rad"], cam["tilt_x_rad"], cam["tilt_y_rad"])
+    return cam["height_m"] + f.clean * (ray_grid(cfg.camera).dirs @ r_wc.T)[..., 2]
+
+
+def test_family_keys_are_off_by_default_and_keep_the_digest():
+    c = SceneConfig()
+    assert c.thin_fraction == 0.0
+    assert "thin_fraction" not in c.to_dict()  # old configs keep their digest and output dirs
+    assert SimConfig.from_dict({"scene": {"thin_fraction": 0.0}}).digest() == SimConfig().digest()
+    assert SimConfig.from_dict({"scene": {"thin_fraction": 0.3}}).digest() != SimConfig().digest()
+
+
+@pytest.mark.parametrize(
+    "key,value,match",
+    [
+        ("thin_fraction", 1.5, "scene.thin_fraction"),
+        ("thin_thickness_m", [0.008, 0.003], "above max"),
+        ("thin_thickness_m", [0.003, 0.2], "scene.thin_thickness_m"),
+        ("thin_shapes", ["disc", "spoon"], "scene.thin_shapes"),
+    ],
+)
+def test_bad_family_values_are_one_line_config_errors(key, value, match):
+    with pytest.raises(ConfigError, match=match) as exc:
+        SimConfig.from_dict({"scene": {key: value}})
+    assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("kind", THIN_KINDS)
+def test_thin_shapes_are_flat_with_the_requested_size(kind):
+    s = make_thin_shape(kind, np.random.default_rng(1), 0.08, 0.004)
+    np.testing.assert_allclose(s.extents.max(), 0.08, rtol=0.03)
+    assert s.extents[2] == pytest.approx(0.004, rel=1e-4)
+    assert s.params["thin"] and s.parts
+
+
+def test_thin_objects_take_the_lowest_slots():
+    cfg = SceneConfig(n_objects=(10, 10), thin_fraction=0.5)
+    scene = sample_scene(np.random.default_rng(4), cfg)
+    thin = [o.shape.params.get("thin", False) for o in scene.objects]
+    n = sum(thin)
+    assert 0 < n < 10 and thin == [True] * n + [False] * (10 - n)
+
+
+def test_thin_objects_rest_flat_and_are_labelled():
+    cfg = SimConfig.from_dict({"scene": {"n_objects": [3, 3], "thin_fraction": 1.0}})
+    for i in range(3):
+        f = generate_frame(i, 7, cfg)
+        objs = f.scene["params"]["objects"]
+        assert all(o["thin"] and o["thickness_m"] < 0.01 for o in objs)
+        for o in objs:
+            up = quat_to_matrix(np.array(o["rest_quat"]))[2, 2]
+            assert abs(up) > 0.9 or o["rest_pos_m"][2] > 0.006  # flat on the floor, or on another one
+        z = _world_z(f, cfg)
+        assert f.label.sum() > 200  # thin objects are objects
+        assert z[f.label == 1].max() < 0.03  # ... and barely stand out of the floor
+
+
+def test_family_configs_validate_and_have_no_sensor_section():
+    files = sorted(FAMILIES.glob("*.json"))
+    assert files
+    for p in files:
+        d = json.loads(p.read_text())
+        assert set(d) == {"scene"}, p.name  # the sensor section is merged in elsewhere
+        assert SimConfig.from_dict(d).digest() != SimConfig().digest(), p.name
