@@ -8,8 +8,9 @@ from pathlib import Path
 
 from edge.cliutil import print_json, progress, run
 from edge.errors import DataError
-from edge.evaluate import FIGURE_PICKS, EvalReport, evaluate, model_label
+from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, evaluate, model_label
 from edge.frames import TOPIC_DEPTH, TOPIC_LABELS, Frame, list_mcap_files
+from edge.metrics import ErrorBreakdown, MetricSummary
 
 PROG = "depthseg-eval"
 
@@ -18,7 +19,9 @@ parser = argparse.ArgumentParser(
     description=(
         "Evaluate a segmentation model on labelled depth frames. Per frame: pixel accuracy, object IoU, "
         "precision and recall over valid pixels (the paper's definitions), averaged over frames; plus the "
-        "pooled IoU over all pixels. A frame without object pixels and without object prediction scores 1."
+        "pooled IoU over all pixels. A frame without object pixels and without object prediction scores 1. "
+        "Also where the errors are: the pooled union (TP + FP + FN) split into TP, false object and missed "
+        "object near the true object boundaries (within --boundary-px) and far from them."
     ),
     epilog=(
         "PATH is a .mcap file or a directory of them: simulated data from depthseg-sim, or any ROS 2 "
@@ -51,6 +54,27 @@ parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (def
 parser.add_argument("--labels-topic", default=None, help=f"label Image topic, mono8 nonzero = object (default: auto-detected, e.g. {TOPIC_LABELS})")
 parser.add_argument("--limit", type=int, default=None, metavar="N", help="stop after N labelled frames")
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
+
+
+def add_boundary_args(p: argparse.ArgumentParser) -> None:
+    """The ``--boundary-px`` and ``--ignore-boundary`` options, shared with tools/eval_blensor.py.
+
+    Args:
+        p: the parser to extend.
+    """
+    p.add_argument(
+        "--boundary-px", type=int, default=DEFAULT_BOUNDARY_PX, metavar="B",
+        help="error breakdown: errors within B px (chessboard distance) of a true boundary pixel count as "
+        f"'boundary', the rest as 'far' (default {DEFAULT_BOUNDARY_PX})",
+    )
+    p.add_argument(
+        "--ignore-boundary", type=int, default=None, metavar="PX",
+        help="also score with a void band of PX px around the true object boundaries left out (PASCAL VOC "
+        "style), printed beside the plain scores (default: off)",
+    )
+
+
+add_boundary_args(parser)
 
 
 def _message_counts(path: Path) -> dict[str, int] | None:
@@ -99,21 +123,78 @@ def open_frames(path: str, depth_topic: str | None, labels_topic: str | None) ->
     return chain(), total
 
 
-def format_table(report: EvalReport, model_name: str) -> str:
-    """The paper's Table III/IV layout: mean per-frame scores in %, plus pooled IoU."""
-    rows = [(model_name, report.metrics)]
-    if report.baseline is not None:
-        bp = report.baseline_params or {}
-        med = f" (median {bp['median_px']})" if bp.get("median_px") else ""
-        rows.append((f"RANSAC plane + {1000 * bp.get('height_threshold_m', 0.0):g} mm{med}", report.baseline))
-    w = max(len(r[0]) for r in rows + [("Model", None)])
+def _score_rows(names: list[str], summaries: list[MetricSummary | None]) -> list[str]:
+    """Header, rule and one row per method of the paper's scores in % (a missing summary prints as -)."""
+    w = max(len(n) for n in names + ["Model"])
     head = f"{'Model':<{w}}  {'Pixel acc.':>10}  {'IoU':>7}  {'Precision':>9}  {'Recall':>7}  {'Pooled IoU':>10}"
     lines = [head, "-" * len(head)]
-    for name, m in rows:
+    for name, m in zip(names, summaries):
+        if m is None:
+            lines.append(f"{name:<{w}}  {'-':>10}  {'-':>7}  {'-':>9}  {'-':>7}  {'-':>10}")
+            continue
         lines.append(
             f"{name:<{w}}  {100 * m.pixel_accuracy:>10.2f}  {100 * m.iou:>7.2f}  {100 * m.precision:>9.2f}  "
             f"{100 * m.recall:>7.2f}  {100 * m.pooled_iou:>10.2f}"
         )
+    return lines
+
+
+BREAKDOWN_COLUMNS = (("tp", "TP"), ("fp_boundary", "FP bound."), ("fp_far", "FP far"),
+                     ("fn_boundary", "FN bound."), ("fn_far", "FN far"))
+
+
+def _breakdown_rows(names: list[str], breakdowns: list[ErrorBreakdown]) -> list[str]:
+    """One row per method: the shares of the pooled union in %, which sum to 100."""
+    w = max(len(n) for n in names + ["Model"])
+    head = f"{'Model':<{w}}" + "".join(f"  {title:>9}" for _, title in BREAKDOWN_COLUMNS)
+    lines = [head, "-" * len(head)]
+    for name, bd in zip(names, breakdowns):
+        sh = bd.shares()
+        lines.append(f"{name:<{w}}" + "".join(f"  {100 * sh[k]:>9.2f}" for k, _ in BREAKDOWN_COLUMNS))
+    return lines
+
+
+def format_table(report: EvalReport, model_name: str) -> str:
+    """The paper's Table III/IV layout (mean per-frame scores in %, plus pooled IoU) and the extra blocks.
+
+    Below the plain table: where the errors are (the breakdown of the pooled union) and, with
+    ``--ignore-boundary``, the same scores with the void band left out, labelled as such.
+
+    Args:
+        report: what `edge.evaluate.evaluate` measured.
+        model_name: the name of the model row.
+
+    Returns:
+        The printable text, lines joined with newlines.
+    """
+    names = [model_name]
+    plain = [report.metrics]
+    breakdowns = [report.breakdown]
+    ignored = [report.ignore_boundary]
+    if report.baseline is not None:
+        bp = report.baseline_params or {}
+        med = f" (median {bp['median_px']})" if bp.get("median_px") else ""
+        names.append(f"RANSAC plane + {1000 * bp.get('height_threshold_m', 0.0):g} mm{med}")
+        plain.append(report.baseline)
+        breakdowns.append(report.baseline_breakdown)
+        ignored.append(report.baseline_ignore_boundary)
+    lines = _score_rows(names, plain)
+    bds = [b for b in breakdowns if b is not None]
+    if len(bds) == len(names):
+        lines += [
+            "",
+            "Where the errors are, in % of the pooled union (TP + FP + FN over valid pixels; sums to 100, TP = pooled IoU).",
+            f"FP = false object, FN = missed object; bound. = within {bds[0].boundary_px} px of a true object boundary "
+            "pixel, far = farther:",
+        ]
+        lines += _breakdown_rows(names, bds)
+    if report.ignore_boundary_px is not None:
+        lines += [
+            "",
+            f"EXTRA score, ignoring a {report.ignore_boundary_px} px void band around true object boundaries "
+            "(the plain scores above count every valid pixel):",
+        ]
+        lines += _score_rows([f"{n} [void band]" for n in names], ignored)
     notes = [
         f"{report.frames} frames, threshold {report.threshold:g}; each score is the mean over frames in % "
         "(pooled IoU: over all valid pixels of all frames).",
@@ -146,6 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             report = evaluate(
                 predictor, bar, threshold=args.threshold, baseline=base, figures_dir=args.figures,
                 max_figures=args.max_figures, figure_pick=args.figures_pick, limit=args.limit,
+                boundary_px=args.boundary_px, ignore_boundary=args.ignore_boundary,
             )
         if args.json:
             print_json(report.to_dict())

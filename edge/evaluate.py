@@ -2,9 +2,14 @@
 
 Why streaming: a test set of thousands of frames must not be held in memory; `evaluate` pulls
 one frame at a time from any iterable of `edge.frames.Frame` and keeps only running sums
-(`edge.metrics.MetricAccumulator`) plus at most ``max_figures`` frames for the figures.
+(`edge.metrics.MetricAccumulator`, `edge.metrics.BreakdownAccumulator`) plus at most
+``max_figures`` frames for the figures.
 Predictions are thresholded at the model's stored decision boundary unless told otherwise, the
-way the model will be used; scores count valid pixels only.
+way the model will be used; scores count valid pixels only. Model and baseline get the same
+three scores: the paper's (plain), where their errors lie relative to the true object boundaries
+(the breakdown of the pooled union), and optionally the plain scores again with a void band
+around the true boundaries left out (``ignore_boundary``), always in addition to, never instead
+of, the plain ones.
 
 Figures follow the paper's Fig. 5: (a) the preprocessed input, (b) the ground truth, (c) the
 prediction coloured grey = correct background, white = correct object, blue = missed object
@@ -27,7 +32,17 @@ from edge.baseline import PlaneBaseline, intrinsics_for
 from edge.errors import ConfigError, DataError, ModelError
 from edge.frames import Frame, write_bytes_atomic
 from edge.meta import ModelMeta
-from edge.metrics import MetricAccumulator, MetricSummary, confusion, frame_scores, threshold_logit
+from edge.metrics import (
+    BreakdownAccumulator,
+    ErrorBreakdown,
+    FrameScores,
+    MetricAccumulator,
+    MetricSummary,
+    boundary_band,
+    confusion,
+    frame_scores,
+    threshold_logit,
+)
 from edge.predict import Predictor
 from edge.preprocess import standardize, valid_mask
 
@@ -42,6 +57,7 @@ COLORS: dict[str, tuple[int, int, int]] = {
     "invalid": (60, 0, 80),
 }
 FIGURE_PICKS = ("first", "worst")
+DEFAULT_BOUNDARY_PX = 2
 
 
 @dataclass
@@ -55,6 +71,11 @@ class EvalReport:
     baseline_params: dict[str, Any] | None = None
     unlabelled: int = 0
     figures: list[Path] = field(default_factory=list)
+    breakdown: ErrorBreakdown | None = None
+    baseline_breakdown: ErrorBreakdown | None = None
+    ignore_boundary_px: int | None = None  # void band width when --ignore-boundary was asked for
+    ignore_boundary: MetricSummary | None = None  # None also when no frame had a pixel outside the band
+    baseline_ignore_boundary: MetricSummary | None = None
 
     @property
     def frames(self) -> int:
@@ -63,16 +84,44 @@ class EvalReport:
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"model": self.model, "threshold": self.threshold, "unlabelled_frames": self.unlabelled}
         d.update(self.metrics.to_dict())
+        self._add_extra_scores(d, self.breakdown, self.ignore_boundary)
         if self.baseline is not None:
             b = self.baseline.to_dict()
             params = dict(self.baseline_params or {})
             b["method"] = "ransac-plane-height"
             b["threshold"] = params.get("height_threshold_m")  # metres above the fitted plane
             b.update(params)
+            self._add_extra_scores(b, self.baseline_breakdown, self.baseline_ignore_boundary)
             d["baseline"] = b
         if self.figures:
             d["figures"] = [str(p) for p in self.figures]
         return d
+
+    def _add_extra_scores(self, d: dict[str, Any], bd: ErrorBreakdown | None, ign: MetricSummary | None) -> None:
+        """``breakdown`` and ``ignore_boundary`` keys of one method (model or baseline), in place."""
+        if bd is not None:
+            d["breakdown"] = bd.to_dict()
+        if self.ignore_boundary_px is not None:
+            d["ignore_boundary"] = {"px": self.ignore_boundary_px, **(ign.to_dict() if ign is not None else {"frames": 0})}
+
+
+class _MethodScores:
+    """The streaming scores of one method (model or baseline) over the frames: plain, breakdown, void band."""
+
+    def __init__(self, boundary_px: int, ignore_px: int | None) -> None:
+        self.plain = MetricAccumulator()
+        self.breakdown = BreakdownAccumulator(boundary_px)
+        self.ignored = MetricAccumulator() if ignore_px is not None else None
+
+    def add(self, pred: np.ndarray, label: np.ndarray, valid: np.ndarray, outside_void: np.ndarray | None) -> FrameScores | None:
+        s = self.plain.add(pred, label, valid)
+        self.breakdown.add(pred, label, valid)
+        if self.ignored is not None and outside_void is not None:
+            self.ignored.add(pred, label, outside_void)
+        return s
+
+    def ignored_summary(self) -> MetricSummary | None:
+        return self.ignored.summary() if self.ignored is not None and self.ignored.frames else None
 
 
 def model_label(meta: ModelMeta | None) -> str:
@@ -168,6 +217,8 @@ def evaluate(
     max_figures: int = 8,
     figure_pick: str = "first",
     limit: int | None = None,
+    boundary_px: int = DEFAULT_BOUNDARY_PX,
+    ignore_boundary: int | None = None,
 ) -> EvalReport:
     """Stream ``frames`` through ``predictor`` and score them (frames without labels are counted, not scored).
 
@@ -175,7 +226,10 @@ def evaluate(
     0.5. ``baseline`` (True or a configured `PlaneBaseline`) scores the RANSAC plane baseline on
     the same frames. ``figure_pick`` chooses which frames get a figure: the ``first`` ones or the
     ``worst`` by IoU (kept in a bounded heap, so memory stays constant). ``limit`` stops after
-    that many labelled frames.
+    that many labelled frames. ``boundary_px`` is the band around true object boundaries that
+    splits the errors into the breakdown (`edge.metrics.boundary_band`); ``ignore_boundary``
+    (pixels, or None for off) adds a second set of scores with a void band of that width around
+    the true boundaries left out, PASCAL VOC style.
     """
     meta = getattr(predictor, "meta", None)
     if threshold is None:
@@ -193,8 +247,10 @@ def evaluate(
         fig_dir.mkdir(parents=True, exist_ok=True)
     sensor = meta.sensor if meta is not None else None
 
-    acc = MetricAccumulator()
-    bacc = MetricAccumulator() if base is not None else None
+    if ignore_boundary is not None:
+        boundary_band(np.zeros((1, 1), bool), ignore_boundary)  # fail on a bad width before any inference
+    acc = _MethodScores(boundary_px, ignore_boundary)
+    bacc = _MethodScores(boundary_px, ignore_boundary) if base is not None else None
     unlabelled = 0
     seen = 0
     figures: list[Path] = []
@@ -217,11 +273,12 @@ def evaluate(
         if logits.shape != depth.shape:
             raise ModelError(f"{predictor.name}: returned logits of shape {logits.shape} for a {depth.shape} frame")
         pred = logits >= tl
-        s = acc.add(pred, label, valid)
+        outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
+        s = acc.add(pred, label, valid, outside_void)
         bpred = None
         if base is not None and bacc is not None:
             bpred = base.predict(depth, intrinsics_for(depth.shape, fr.info, sensor))
-            bacc.add(bpred, label, valid)
+            bacc.add(bpred, label, valid, outside_void)
         i = seen
         seen += 1
         if fig_dir is not None and max_figures > 0 and s is not None:
@@ -247,9 +304,14 @@ def evaluate(
     return EvalReport(
         model=getattr(predictor, "name", "model"),
         threshold=float(threshold),
-        metrics=acc.summary(),
-        baseline=bacc.summary() if bacc is not None else None,
+        metrics=acc.plain.summary(),
+        baseline=bacc.plain.summary() if bacc is not None else None,
         baseline_params=asdict(base) if base is not None else None,
         unlabelled=unlabelled,
         figures=figures,
+        breakdown=acc.breakdown.summary(),
+        baseline_breakdown=bacc.breakdown.summary() if bacc is not None else None,
+        ignore_boundary_px=ignore_boundary,
+        ignore_boundary=acc.ignored_summary(),
+        baseline_ignore_boundary=bacc.ignored_summary() if bacc is not None else None,
     )

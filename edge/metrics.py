@@ -24,7 +24,17 @@ A pixel is predicted object when sigmoid(logit) >= threshold (the paper: values 
 decision boundary are background, all others object); `predict_mask` compares logits with
 logit(threshold) so no sigmoid is evaluated per pixel.
 
-Numpy only: used by the edge tools (tune, replay) as well as evaluation.
+Where the errors are (`boundary_band`, `BreakdownAccumulator`): most disagreement between a
+segmentation and its labels sits on the object outline, where a label is a matter of a pixel
+either way, and that says something different about a model than a false blob in the middle of
+the table or a whole missed object. So the pooled union (TP + FP + FN over valid pixels of all
+frames) is split into TP and four error shares: false object (FP) and missed object (FN), each
+within ``B`` px of a true object boundary ("boundary") or farther away ("far"). The five shares
+sum to 1 and the TP share equals the pooled IoU, so the four error shares say how the pooled
+IoU's shortfall from 1 divides up. The same band, as a void region excluded from scoring (the
+way PASCAL VOC ignores a 5 px band around its outlines), gives `depthseg-eval --ignore-boundary`.
+
+Numpy only (no torch, no cv2): used by the edge tools (tune, replay) as well as evaluation.
 """
 
 from __future__ import annotations
@@ -45,6 +55,9 @@ __all__ = [
     "predict_mask",
     "confusion",
     "frame_scores",
+    "boundary_band",
+    "ErrorBreakdown",
+    "BreakdownAccumulator",
 ]
 
 
@@ -197,3 +210,132 @@ class MetricAccumulator:
             pooled=p,
             skipped=self.skipped,
         )
+
+
+def _window_any(mask: np.ndarray, r: int) -> np.ndarray:
+    """True where the (2r+1) x (2r+1) window around a pixel, clipped to the image, holds a True pixel.
+
+    Separable (rows, then columns) over a False-padded copy, so pixels outside the image never count.
+    """
+    k = 2 * r + 1
+    m = np.pad(mask, r, constant_values=False)
+    m = np.lib.stride_tricks.sliding_window_view(m, k, axis=0).any(axis=-1)
+    return np.lib.stride_tricks.sliding_window_view(m, k, axis=1).any(axis=-1)
+
+
+def boundary_band(label: np.ndarray, px: int) -> np.ndarray:
+    """Pixels within ``px`` px (chessboard distance) of a true object boundary pixel.
+
+    A true boundary pixel is one whose 8-neighbourhood (inside the image) holds the other class
+    of the ground truth (nonzero = object); the validity mask plays no part, so the band does not
+    move with sensor dropouts. Boundary pixels lie on both sides of an outline, so the band spans
+    ``px + 1`` pixels on each side of it (``px = 0``: just the two rings of boundary pixels). The
+    image border is no boundary. Equivalently, a pixel is in the band when the
+    (2 px + 3)-square window around it holds both classes, which is how it is computed.
+
+    Args:
+        label: H x W ground truth, nonzero = object.
+        px: band half-width in pixels, >= 0.
+
+    Returns:
+        H x W bool mask, True inside the band (all False for a frame of one class only).
+
+    Raises:
+        ConfigError: ``px`` is negative or not an integer.
+    """
+    if isinstance(px, bool) or not isinstance(px, (int, np.integer)) or px < 0:
+        raise ConfigError(f"boundary band width must be an integer >= 0 pixels, got {px!r}")
+    g = np.asarray(label).astype(bool, copy=False)
+    if g.ndim != 2:
+        raise DataError(f"labels must be an H x W image, got shape {g.shape}")
+    r = int(px) + 1
+    return _window_any(g, r) & _window_any(~g, r)
+
+
+@dataclass(frozen=True)
+class ErrorBreakdown:
+    """Pooled pixel counts of the union (TP + FP + FN), with the errors split by the boundary band."""
+
+    boundary_px: int
+    tp: int = 0
+    fp_boundary: int = 0  # false object within the band
+    fp_far: int = 0  # false object outside the band
+    fn_boundary: int = 0  # missed object within the band
+    fn_far: int = 0  # missed object outside the band
+
+    @property
+    def union(self) -> int:
+        return self.tp + self.fp_boundary + self.fp_far + self.fn_boundary + self.fn_far
+
+    def __add__(self, other: ErrorBreakdown) -> ErrorBreakdown:
+        if other.boundary_px != self.boundary_px:
+            raise ConfigError(f"cannot pool breakdowns of {self.boundary_px} px and {other.boundary_px} px bands")
+        return ErrorBreakdown(
+            self.boundary_px, tp=self.tp + other.tp, fp_boundary=self.fp_boundary + other.fp_boundary,
+            fp_far=self.fp_far + other.fp_far, fn_boundary=self.fn_boundary + other.fn_boundary,
+            fn_far=self.fn_far + other.fn_far,
+        )
+
+    def shares(self) -> dict[str, float]:
+        """Each count as a fraction of the union; they sum to 1 and ``tp`` is the pooled IoU.
+
+        Returns:
+            ``tp``, ``fp_boundary``, ``fp_far``, ``fn_boundary``, ``fn_far`` in [0, 1]. An empty
+            union (no object anywhere, none predicted) gives ``tp`` 1 and no error, like the
+            pooled IoU's 0 / 0 convention.
+        """
+        u = self.union
+        counts = {"tp": self.tp, "fp_boundary": self.fp_boundary, "fp_far": self.fp_far,
+                  "fn_boundary": self.fn_boundary, "fn_far": self.fn_far}
+        if u == 0:
+            return {k: (1.0 if k == "tp" else 0.0) for k in counts}
+        return {k: v / u for k, v in counts.items()}
+
+    def to_dict(self) -> dict[str, object]:
+        """The ``--json`` ``breakdown`` object: the shares, the band width and the raw counts."""
+        d: dict[str, object] = {"boundary_px": self.boundary_px, **self.shares()}
+        d["counts"] = {"union": self.union, "tp": self.tp, "fp_boundary": self.fp_boundary, "fp_far": self.fp_far,
+                       "fn_boundary": self.fn_boundary, "fn_far": self.fn_far}
+        return d
+
+
+class BreakdownAccumulator:
+    """Streaming `ErrorBreakdown` over any number of frames (constant memory: five counters).
+
+    Args:
+        boundary_px: band half-width in pixels around true object boundaries (see `boundary_band`).
+    """
+
+    def __init__(self, boundary_px: int = 2) -> None:
+        boundary_band(np.zeros((1, 1), bool), boundary_px)  # validate once, at construction
+        self.boundary_px = int(boundary_px)
+        self._counts = ErrorBreakdown(boundary_px=self.boundary_px)
+
+    def add(self, pred: np.ndarray, label: np.ndarray, valid: np.ndarray | None = None) -> ErrorBreakdown:
+        """Fold in one frame, valid pixels only (as `confusion`).
+
+        Args:
+            pred: H x W predicted object mask.
+            label: H x W ground truth, nonzero = object.
+            valid: H x W mask of scored pixels; None scores all.
+
+        Returns:
+            This frame's counts.
+        """
+        band = boundary_band(label, self.boundary_px)
+        if valid is not None:
+            valid = np.asarray(valid, dtype=bool)
+            if valid.shape != band.shape:
+                raise DataError(f"valid-mask shape {valid.shape} differs from label shape {band.shape}")
+            near, far = valid & band, valid & ~band
+        else:
+            near, far = band, ~band
+        cn, cf = confusion(pred, label, near), confusion(pred, label, far)
+        frame = ErrorBreakdown(self.boundary_px, tp=cn.tp + cf.tp, fp_boundary=cn.fp, fp_far=cf.fp,
+                               fn_boundary=cn.fn, fn_far=cf.fn)
+        self._counts = self._counts + frame
+        return frame
+
+    def summary(self) -> ErrorBreakdown:
+        """The pooled counts so far (`ErrorBreakdown.shares` turns them into fractions)."""
+        return self._counts

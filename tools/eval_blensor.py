@@ -8,6 +8,7 @@ straight into `edge.evaluate.evaluate`. Only scans with at least one object pixe
 (the shared set has 9 of them; scan_0 is the empty floor, used to find the ground's id).
 
     .venv/bin/python tools/eval_blensor.py [--model M] [--baseline] [--json] [--figures DIR]
+        [--boundary-px B] [--ignore-boundary PX]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ if str(ROOT) not in sys.path:  # run as a script from a checkout
 
 from edge.cliutil import print_json, run  # noqa: E402
 from edge.errors import DataError  # noqa: E402
+from edge.eval_cli import add_boundary_args, format_table  # noqa: E402
 from edge.evaluate import FIGURE_PICKS, evaluate, model_label  # noqa: E402
 from edge.frames import Frame  # noqa: E402
 
@@ -32,7 +34,7 @@ DEFAULT_DATA = ROOT.parent / "shared" / "data" / "blensor"
 parser = argparse.ArgumentParser(
     prog=PROG,
     description="Score a model (and optionally the RANSAC baseline) on the seed paper's BlenSor scans "
-    "that contain objects; same table and --json as depthseg-eval.",
+    "that contain objects; same table (with the error breakdown) and --json as depthseg-eval.",
 )
 parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
 parser.add_argument("--data", default=str(DEFAULT_DATA), help=f"directory of scan_*.npy (default {DEFAULT_DATA})")
@@ -43,6 +45,7 @@ parser.add_argument("--figures", metavar="DIR", default=None, help="write Fig. 5
 parser.add_argument("--max-figures", type=int, default=9, metavar="N", help="number of figures (default 9: all)")
 parser.add_argument("--figures-pick", choices=FIGURE_PICKS, default="first", help="first or worst frames")
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
+add_boundary_args(parser)  # --boundary-px, --ignore-boundary: the same error breakdown as depthseg-eval
 
 
 def blensor_frames(data: str | Path) -> tuple[list[Path], Iterator[Frame]]:
@@ -78,7 +81,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     def body() -> int:
-        from edge.eval_cli import format_table
         from edge.predict import load_predictor
 
         files, frames = blensor_frames(args.data)
@@ -86,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         report = evaluate(
             predictor, frames, threshold=args.threshold, baseline=args.baseline, figures_dir=args.figures,
             max_figures=args.max_figures, figure_pick=args.figures_pick,
+            boundary_px=args.boundary_px, ignore_boundary=args.ignore_boundary,
         )
         if args.json:
             d = report.to_dict()

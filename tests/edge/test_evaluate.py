@@ -195,6 +195,45 @@ def test_cli_json_keys(tiny_ckpt, data, capsys):
     for k in ("pixel_accuracy", "iou", "precision", "recall", "pooled_iou"):
         assert 0.0 <= out[k] <= 1.0
     assert "baseline" not in out
+    bd = out["breakdown"]  # always there, default 2 px band; the void-band score only on request
+    assert bd["boundary_px"] == 2 and "ignore_boundary" not in out
+    assert bd["tp"] == pytest.approx(out["pooled_iou"])
+
+
+BREAKDOWN_KEYS = ("tp", "fp_boundary", "fp_far", "fn_boundary", "fn_far")
+
+
+def test_cli_breakdown_and_ignore_boundary_for_model_and_baseline(tiny_ckpt, data, capsys):
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(data), "--json", "--baseline", "--threads", "1",
+                    "--boundary-px", "1", "--ignore-boundary", "2"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    for d in (out, out["baseline"]):
+        bd = d["breakdown"]
+        assert bd["boundary_px"] == 1
+        assert all(0.0 <= bd[k] <= 1.0 for k in BREAKDOWN_KEYS)
+        assert sum(bd[k] for k in BREAKDOWN_KEYS) == pytest.approx(1.0)
+        assert bd["tp"] == pytest.approx(d["pooled_iou"])
+        c = bd["counts"]
+        assert c["tp"] == d["pooled_counts"]["tp"] and c["fp_boundary"] + c["fp_far"] == d["pooled_counts"]["fp"]
+        ig = d["ignore_boundary"]
+        assert ig["px"] == 2 and ig["frames"] == 5
+        assert all(0.0 <= ig[k] <= 1.0 for k in ("iou", "precision", "recall", "pooled_iou"))
+        assert ig["pooled_counts"]["tp"] < d["pooled_counts"]["tp"]  # the void band took pixels away
+    # the 2-4 cm boxes are easy for the baseline: what it gets wrong is on the outlines
+    b = out["baseline"]["breakdown"]
+    assert b["fp_boundary"] + b["fn_boundary"] >= b["fp_far"] + b["fn_far"]
+    rc = eval_main(["--model", str(tiny_ckpt), "--data", str(data / "a.mcap"), "--baseline", "--threads", "1",
+                    "--ignore-boundary", "1"])
+    assert rc == 0
+    table = capsys.readouterr().out
+    assert "Where the errors are" in table and "within 2 px" in table
+    for col in ("FP bound.", "FP far", "FN bound.", "FN far"):
+        assert col in table
+    assert "EXTRA score, ignoring a 1 px void band" in table and "[void band]" in table
+    assert table.count("RANSAC plane + 8 mm") == 3  # plain, breakdown and void-band rows
+    assert eval_main(["--model", str(tiny_ckpt), "--data", str(data), "--boundary-px", "-1"]) == 2
+    assert "boundary band width" in capsys.readouterr().err
 
 
 def test_cli_table_baseline_and_figures(tiny_ckpt, data, tmp_path, capsys):
@@ -323,3 +362,6 @@ def test_eval_blensor_tool(tiny_ckpt, capsys):
     assert out["baseline"]["frames"] == 9
     assert 0.5 < out["baseline"]["iou"] <= 1.0  # the classical baseline finds most objects on BlenSor
     assert out["skipped_frames"] == 0 and out["unlabelled_frames"] == 0
+    for d in (out, out["baseline"]):
+        assert d["breakdown"]["boundary_px"] == 2
+        assert sum(d["breakdown"][k] for k in BREAKDOWN_KEYS) == pytest.approx(1.0)
