@@ -267,7 +267,7 @@ def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: in
     import torch
 
     from edge.model import build_model
-    from edge.preprocess import preprocess
+    from edge.preprocess import preprocess_for
 
     def runner(seg: Segmenter):
         m = seg.meta
@@ -277,7 +277,7 @@ def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: in
         def whole(d: np.ndarray) -> tuple[float, float]:
             torch.set_num_threads(seg.threads)
             t0 = time.perf_counter()
-            pre = preprocess(d, m.in_channels, m.pad_multiple)
+            pre = preprocess_for(d, m)
             t1 = time.perf_counter()
             with torch.inference_mode():
                 out = model(torch.from_numpy(pre.x[None])).numpy()

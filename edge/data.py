@@ -15,7 +15,8 @@ import numpy as np
 
 from edge.errors import DataError
 from edge.frames import iter_frames
-from edge.preprocess import preprocess
+from edge.meta import ModelMeta
+from edge.preprocess import preprocess_for
 
 __all__ = ["FrameSet", "load_frames", "split_indices", "make_batch"]
 
@@ -67,7 +68,7 @@ def split_indices(n: int, fractions: tuple[float, float, float], seed: int) -> t
 
 
 def make_batch(
-    fs: FrameSet, idx: np.ndarray, channels: int, multiple: int, rng: np.random.Generator | None = None
+    fs: FrameSet, idx: np.ndarray, meta: ModelMeta, rng: np.random.Generator | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x [B,C,Hp,Wp], target [B,1,Hp,Wp], loss mask [B,1,Hp,Wp]); augment when ``rng`` is given.
 
@@ -83,7 +84,7 @@ def make_batch(
                 d, lab = d[:, ::-1], lab[:, ::-1]
             if rng.random() < 0.5:
                 d, lab = d[::-1, :], lab[::-1, :]
-        p = preprocess(d, channels=channels, multiple=multiple)
+        p = preprocess_for(d, meta)
         hp, wp = p.x.shape[-2:]
         t = np.zeros((1, hp, wp), np.float32)
         m = np.zeros((1, hp, wp), np.float32)

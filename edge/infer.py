@@ -25,7 +25,7 @@ import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
-from edge.preprocess import preprocess, preprocess_batch, valid_mask
+from edge.preprocess import preprocess_batch_for, preprocess_for, valid_mask
 
 __all__ = [
     "Prediction",
@@ -157,9 +157,9 @@ class Segmenter:
         else:
             if len(shape) != 4:
                 raise ModelError(f"{path}: expected input [N, C, H, W], found {shape}")
-            if isinstance(shape[1], int) and shape[1] != self.meta.in_channels:
+            if isinstance(shape[1], int) and shape[1] != self.meta.net_channels:
                 raise ModelError(
-                    f"{path}: input has {shape[1]} channels but its metadata says {self.meta.in_channels}; re-export it"
+                    f"{path}: input has {shape[1]} channels but its metadata says {self.meta.net_channels}; re-export it"
                 )
             self._frame_shape = (None, None)
         self.precision = self.props.get("precision", "fp32")
@@ -200,7 +200,7 @@ class Segmenter:
             p = self._run_raw(np.ascontiguousarray(d, dtype=np.float32)[None])[0][0]
             p = np.clip(p, 1e-7, 1.0 - 1e-7)
             return (np.log(p) - np.log1p(-p)).astype(np.float32)
-        pre = preprocess(d, self.meta.in_channels, self.meta.pad_multiple)
+        pre = preprocess_for(d, self.meta)
         out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]
         return np.ascontiguousarray(out[0, 0, :h, :w])
 
@@ -214,7 +214,7 @@ class Segmenter:
             x = np.stack([np.asarray(d, dtype=np.float32) for d in ds])
             p = np.clip(self._run_raw(x)[0], 1e-7, 1.0 - 1e-7)
             return (np.log(p) - np.log1p(-p)).astype(np.float32)
-        x, _valid = preprocess_batch(ds, self.meta.in_channels, self.meta.pad_multiple)
+        x, _valid = preprocess_batch_for(ds, self.meta)
         out = self.session.run([self._out_main], {self.input_name: x})[0]
         return np.ascontiguousarray(out[:, 0, :h, :w])
 
@@ -234,7 +234,7 @@ class Segmenter:
             else:
                 valid = valid_mask(d)
         else:
-            pre = preprocess(d, self.meta.in_channels, self.meta.pad_multiple)
+            pre = preprocess_for(d, self.meta)
             valid = pre.valid
             t1 = time.perf_counter()
             out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]

@@ -13,7 +13,9 @@ import math
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
+from edge.cues import CUES
 from edge.errors import ModelError
+from edge.preprocess import STANDARDIZE_MODES
 
 __all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics"]
 
@@ -67,6 +69,7 @@ class ModelMeta:
     extra_skip: bool = False
     pad_multiple: int = 32
     standardize: str = "valid-pixels"
+    cues: tuple[str, ...] = ()  # extra input channels after the depth copies (edge.cues.CUES)
     threshold: float = 0.5
     threshold_policy: str = "default 0.5 (paper)"
     sensor: SensorSpec = field(default_factory=SensorSpec)
@@ -81,6 +84,17 @@ class ModelMeta:
             raise ModelError(f"threshold must lie in (0, 1), got {self.threshold}")
         if self.pad_multiple < 1:
             raise ModelError(f"pad_multiple must be >= 1, got {self.pad_multiple}")
+        if self.standardize not in STANDARDIZE_MODES:
+            raise ModelError(f"standardize must be one of {list(STANDARDIZE_MODES)}, got {self.standardize!r}")
+        object.__setattr__(self, "cues", tuple(self.cues))
+        bad = [c for c in self.cues if c not in CUES]
+        if bad or len(set(self.cues)) != len(self.cues):
+            raise ModelError(f"cues must be distinct names from {list(CUES)}, got {list(self.cues)}")
+
+    @property
+    def net_channels(self) -> int:
+        """Channels the network's first layer takes: the depth copies plus one per cue."""
+        return self.in_channels + len(self.cues)
 
     def with_(self, **changes: Any) -> ModelMeta:
         """A copy with some fields changed (the dataclass is frozen)."""
@@ -89,6 +103,7 @@ class ModelMeta:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["sensor"]["distortion"] = list(self.sensor.distortion)
+        d["cues"] = list(self.cues)
         return d
 
     def to_json(self) -> str:
@@ -134,11 +149,12 @@ class ModelMeta:
             "encoder": self.encoder,
             "width": repr(float(self.width)),
             "in_channels": str(self.in_channels),
+            "cues": ",".join(self.cues),
             "params": str(self.params),
             "input_size": f"{s.height}x{s.width}",
             "intrinsics": f"fx={s.fx:.4f} fy={s.fy:.4f} cx={s.cx:.4f} cy={s.cy:.4f}",
             "preprocessing": f"invalid(<=0,nan,inf)->mask; standardize={self.standardize}; "
-            f"invalid->0; zero-pad to multiple of {self.pad_multiple}",
+            f"invalid->0; cues={list(self.cues)}; zero-pad to multiple of {self.pad_multiple}",
             "training": json.dumps(self.training, sort_keys=True),
         }
 

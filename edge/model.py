@@ -61,7 +61,7 @@ def count_parameters(model: nn.Module, trainable_only: bool = False) -> int:
 def build_model(meta: ModelMeta) -> FCN8s:
     """The network a ``ModelMeta`` describes (weights freshly initialised: Kaiming, PyTorch default)."""
     name = meta.encoder + ("_bn" if meta.batch_norm and not meta.encoder.endswith("_bn") else "")
-    enc = create_encoder(name, in_channels=meta.in_channels, width=meta.width)
+    enc = create_encoder(name, in_channels=meta.net_channels, width=meta.width)
     return FCN8s(enc, width=meta.width, extra_skip=meta.extra_skip)
 
 

@@ -63,9 +63,9 @@ class TorchPredictor(Predictor):
         self.name = str(path)
 
     def logits(self, depth: np.ndarray) -> np.ndarray:
-        from edge.preprocess import preprocess
+        from edge.preprocess import preprocess_for
 
-        pre = preprocess(depth, channels=self.meta.in_channels, multiple=self.meta.pad_multiple)
+        pre = preprocess_for(depth, self.meta)
         h, w = pre.shape
         with self._torch.inference_mode():
             out = self.model(self._torch.from_numpy(pre.x[None]))

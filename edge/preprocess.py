@@ -6,6 +6,11 @@ Why each step (paper III.D and Fig. 6):
 - Standardising with the mean and std of the valid pixels only keeps dead corners from
   dragging the statistics, and makes the input independent of camera height.
 - Invalid pixels become 0 (the mean) after standardisation, so they look like "average" depth.
+- ``standardize="robust"`` (models since issue 9): the mean and std come from the valid pixels
+  between their 1st and 99th percentile and the result is clipped to +-``ROBUST_CLIP``, so a few
+  far or saturated pixels cannot swing the whole frame (`edge.cues.robust_mean_std`).
+- ``cues``: extra channels after the depth channels; ``"height"`` is centimetres above the
+  dominant plane (`edge.cues.height_cue`).
 - VGG pools five times, so H and W are zero-padded to multiples of 32 (171 x 224 -> 192 x 224);
   padding goes bottom/right so cropping the output back is a slice.
 
@@ -18,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from edge.cues import CUES, height_cue, robust_mean_std
 from edge.errors import DataError
 
 __all__ = [
@@ -28,10 +34,16 @@ __all__ = [
     "pad",
     "preprocess",
     "preprocess_batch",
+    "preprocess_for",
+    "preprocess_batch_for",
     "STD_FLOOR",
+    "STANDARDIZE_MODES",
+    "ROBUST_CLIP",
 ]
 
 STD_FLOOR = 1e-6  # metres; a frame of one constant valid depth still standardises to zeros
+STANDARDIZE_MODES = ("valid-pixels", "robust")
+ROBUST_CLIP = 8.0  # standardised units; the far floor past a table edge stays within it
 
 
 @dataclass(frozen=True)
@@ -68,9 +80,20 @@ def valid_mask(depth: np.ndarray) -> np.ndarray:
         return np.isfinite(depth) & (depth > 0)
 
 
-def standardize(depth: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
-    """(standardised float32 frame with invalid = 0, mean, std) over the valid pixels only."""
+def standardize(
+    depth: np.ndarray, valid: np.ndarray | None = None, mode: str = "valid-pixels"
+) -> tuple[np.ndarray, float, float]:
+    """(standardised float32 frame with invalid = 0, mean, std) over the valid pixels only.
+
+    Args:
+        depth: [H, W] depth in metres.
+        valid: precomputed `valid_mask` (computed when None).
+        mode: ``"valid-pixels"`` (mean/std of all valid pixels, the paper's) or ``"robust"``
+            (trimmed statistics, output clipped to +-ROBUST_CLIP).
+    """
     depth = _as_frame(depth)
+    if mode not in STANDARDIZE_MODES:
+        raise DataError(f"unknown standardisation '{mode}'; choose from {list(STANDARDIZE_MODES)}")
     if valid is None:
         valid = valid_mask(depth)
     out = np.zeros(depth.shape, dtype=np.float32)
@@ -78,6 +101,10 @@ def standardize(depth: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.
     if n == 0:
         return out, 0.0, 1.0
     vals = depth[valid].astype(np.float64)
+    if mode == "robust":
+        mean, std = robust_mean_std(depth, valid, STD_FLOOR)
+        out[valid] = np.clip((vals - mean) / std, -ROBUST_CLIP, ROBUST_CLIP).astype(np.float32)
+        return out, mean, std
     mean = float(vals.mean())
     std = max(float(vals.std()), STD_FLOOR)
     out[valid] = ((vals - mean) / std).astype(np.float32)
@@ -99,22 +126,66 @@ def pad(x: np.ndarray, multiple: int = 32) -> np.ndarray:
     return np.pad(x, widths)
 
 
-def preprocess(depth: np.ndarray, channels: int = 1, multiple: int = 32) -> Preprocessed:
-    """Raw depth (metres, any invalid marker) -> padded, standardised [C, Hp, Wp] float32."""
+def preprocess(
+    depth: np.ndarray,
+    channels: int = 1,
+    multiple: int = 32,
+    *,
+    standardize_mode: str = "valid-pixels",
+    cues: tuple[str, ...] = (),
+) -> Preprocessed:
+    """Raw depth (metres, any invalid marker) -> padded network input [C, Hp, Wp] float32.
+
+    Args:
+        depth: [H, W] (or [1, H, W]) Z in metres; 0, negative, NaN and inf are invalid.
+        channels: copies of the standardised depth (1, or 3 as the paper feeds a VGG).
+        multiple: pad H and W up to multiples of this.
+        standardize_mode: see `standardize`.
+        cues: extra channels after the depth copies, from `edge.cues.CUES`.
+
+    Returns:
+        `Preprocessed` with ``x`` of ``channels + len(cues)`` channels.
+    """
     if channels not in (1, 3):
         raise DataError(f"channels must be 1 or 3, got {channels}")
+    bad = [c for c in cues if c not in CUES]
+    if bad:
+        raise DataError(f"unknown input cue(s) {bad}; known: {list(CUES)}")
     depth = _as_frame(depth)
     valid = valid_mask(depth)
-    z, mean, std = standardize(depth, valid)
-    x = pad(z, multiple)[None]
-    if channels == 3:
-        x = np.repeat(x, 3, axis=0)
+    z, mean, std = standardize(depth, valid, standardize_mode)
+    planes = [z] * channels
+    for cue in cues:
+        if cue == "height":
+            planes.append(height_cue(depth, valid))
+    x = pad(np.stack(planes), multiple)
     return Preprocessed(x=np.ascontiguousarray(x, dtype=np.float32), valid=valid, mean=mean, std=std)
 
 
-def preprocess_batch(frames: list[np.ndarray], channels: int = 1, multiple: int = 32) -> tuple[np.ndarray, np.ndarray]:
+def preprocess_for(depth: np.ndarray, meta) -> Preprocessed:
+    """`preprocess` with everything a model's `edge.meta.ModelMeta` says about its input."""
+    return preprocess(
+        depth, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues)
+    )
+
+
+def preprocess_batch_for(frames: list[np.ndarray], meta) -> tuple[np.ndarray, np.ndarray]:
+    """`preprocess_batch` with everything a model's `edge.meta.ModelMeta` says about its input."""
+    return preprocess_batch(
+        frames, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues)
+    )
+
+
+def preprocess_batch(
+    frames: list[np.ndarray],
+    channels: int = 1,
+    multiple: int = 32,
+    *,
+    standardize_mode: str = "valid-pixels",
+    cues: tuple[str, ...] = (),
+) -> tuple[np.ndarray, np.ndarray]:
     """Stack frames of one size: (x [N, C, Hp, Wp], valid [N, H, W])."""
-    items = [preprocess(f, channels, multiple) for f in frames]
+    items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues) for f in frames]
     shapes = {it.shape for it in items}
     if len(shapes) != 1:
         raise DataError(f"frames in a batch must share one size, got {sorted(shapes)}")

@@ -84,7 +84,7 @@ def _evaluate(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int) -> tuple[
     with torch.no_grad():
         for s in range(0, len(fs), batch):
             idx = np.arange(s, min(s + batch, len(fs)))
-            x, t, m = (torch.from_numpy(a) for a in make_batch(fs, idx, meta.in_channels, meta.pad_multiple))
+            x, t, m = (torch.from_numpy(a) for a in make_batch(fs, idx, meta))
             logits = model(x)
             loss = nn.functional.binary_cross_entropy_with_logits(logits, t, reduction="none")
             total += float((loss * m).sum())
@@ -169,7 +169,7 @@ def train(
             raise ModelError(f"{last}: nothing to resume; start without --resume")
         blob = read_checkpoint(last)
         saved = ModelMeta.from_dict(blob["meta"])
-        for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip"):
+        for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip", "standardize", "cues"):
             if getattr(saved, k) != getattr(meta, k):
                 raise ConfigError(
                     f"--resume: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"
@@ -204,7 +204,7 @@ def train(
         for b in range(steps_per_epoch):
             idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
             x, t, m = (torch.from_numpy(a) for a in make_batch(
-                train_set, idx, meta.in_channels, meta.pad_multiple, rng if cfg.augment else None))
+                train_set, idx, meta, rng if cfg.augment else None))
             loss = masked_bce(model(x), t, m)
             opt.zero_grad(set_to_none=True)
             loss.backward()

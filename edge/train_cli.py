@@ -42,6 +42,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--width", type=float, default=1.0, help="channel width multiplier (1.0 = paper; 0.125 = the shipped default)")
     m.add_argument("--batch-norm", action="store_true", help="batch norm after each encoder conv (helps from scratch; folded away in ONNX)")
     m.add_argument("--in-channels", type=int, default=3, choices=(1, 3), help="3 = depth replicated (paper); 1 = single channel")
+    m.add_argument("--standardize", default="valid-pixels", choices=("valid-pixels", "robust"),
+                   help="depth standardisation: mean/std of all valid pixels (paper) or trimmed 1-99 %% and "
+                        "clipped (robust to a few far or saturated pixels)")
+    m.add_argument("--cues", default="", help="extra input channels, comma-separated: 'height' = cm above the "
+                   "dominant plane (edge.cues); default none")
     m.add_argument("--extra-skip", action="store_true", help="also fuse pool2 and pool1 (paper V.d)")
     m.add_argument("--encoder-weights", help="local torchvision VGG state_dict file (ImageNet weights); default: from scratch")
     m.add_argument("--freeze-encoder", action="store_true", help="train only the decoder (the paper's setting with pretrained weights)")
@@ -88,8 +93,15 @@ def main(argv: list[str] | None = None) -> int:
 
         if args.encoder not in list_encoders():
             raise ConfigError(f"unknown encoder '{args.encoder}'; valid encoders: {', '.join(list_encoders())}")
+        cues = tuple(c.strip() for c in args.cues.split(",") if c.strip())
+        from edge.cues import CUES
+
+        bad = [c for c in cues if c not in CUES]
+        if bad:
+            raise ConfigError(f"--cues: unknown {bad}; choose from {list(CUES)}")
         meta = ModelMeta(encoder=args.encoder, width=args.width, in_channels=args.in_channels,
-                         batch_norm=args.batch_norm, extra_skip=args.extra_skip)
+                         batch_norm=args.batch_norm, extra_skip=args.extra_skip, standardize=args.standardize,
+                         cues=cues)
         with progress(desc="loading frames", unit="frame") as bar:
             if args.data:
                 allf = load_frames(args.data, limit=args.limit, progress=bar)
@@ -101,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         info = {
             "command": " ".join([PROG] + [shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])]),
             "data": [str(p) for p in (args.data or args.train_dir)],
-            "input": "Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel",
+            "input": ("Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel")
+            + (f" + cues {list(cues)}" if cues else "") + f"; standardize={args.standardize}",
             "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",
         }
         steps = -(-len(train_set) // cfg.batch_size)

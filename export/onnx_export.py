@@ -31,7 +31,7 @@ from edge.frames import atomic_path
 from edge.infer import INPUT_NAME, OUTPUT_LOGITS
 from edge.meta import ModelMeta
 from edge.model import FCN8s
-from edge.preprocess import padded_shape, preprocess
+from edge.preprocess import padded_shape, preprocess, preprocess_for
 
 __all__ = [
     "OPSET",
@@ -117,7 +117,7 @@ def export_onnx(
     model = model.eval()
     s = meta.sensor
     hp, wp = padded_shape(s.height, s.width, meta.pad_multiple)
-    example = torch.zeros(1, meta.in_channels, hp, wp)
+    example = torch.zeros(1, meta.net_channels, hp, wp)
     dims: dict[int, object] = {0: torch.export.Dim("batch", min=1, max=1024)}
     if dynamic_hw:
         dims[2] = 32 * torch.export.Dim("h32", min=1, max=128)
@@ -184,7 +184,7 @@ class ExportCheck:
 
 def torch_logits(model: FCN8s, meta: ModelMeta, depth: np.ndarray) -> np.ndarray:
     """Reference: the Python path (edge.preprocess + the PyTorch model), cropped to H x W."""
-    pre = preprocess(depth, meta.in_channels, meta.pad_multiple)
+    pre = preprocess_for(depth, meta)
     with torch.no_grad():
         out = model.eval()(torch.from_numpy(pre.x[None])).numpy()
     h, w = pre.shape

@@ -27,7 +27,7 @@ import numpy as np
 
 from edge.errors import DataError, ModelError
 from edge.infer import Segmenter, session_options
-from edge.preprocess import preprocess
+from edge.preprocess import preprocess_for
 from edge.sampleframes import FrameSample
 
 __all__ = [
@@ -64,7 +64,7 @@ def _feeds(seg: Segmenter, frames: list[np.ndarray]) -> list[dict[str, np.ndarra
     if seg.with_preprocessing:
         return [{seg.input_name: np.ascontiguousarray(d, dtype=np.float32)[None]} for d in frames]
     m = seg.meta
-    return [{seg.input_name: preprocess(d, m.in_channels, m.pad_multiple).x[None]} for d in frames]
+    return [{seg.input_name: preprocess_for(d, m).x[None]} for d in frames]
 
 
 def quantize_int8(fp32_path: str | Path, out: str | Path, calib: FrameSample, per_channel: bool = True) -> Path:

@@ -24,20 +24,24 @@ __all__ = ["to_single_channel"]
 def to_single_channel(model: FCN8s, meta: ModelMeta) -> tuple[FCN8s, ModelMeta]:
     """(one-channel copy of ``model``, its metadata). The original is left untouched.
 
-    A model that already takes one channel is returned as a copy, unchanged.
+    A model that already takes one depth channel is returned as a copy, unchanged. With cue
+    channels (``meta.cues``, e.g. height above the dominant plane) only the kernels of the
+    replicated depth channels are summed; the cue kernels are kept as they are, so the exported
+    model takes ``1 + len(cues)`` channels: depth first, then the cues in order.
     """
     first = model.encoder.features[0]
     if not isinstance(first, nn.Conv2d):
         raise ModelError(f"expected the encoder to start with a Conv2d, found {type(first).__name__}")
-    if first.in_channels != meta.in_channels:
+    if first.in_channels != meta.net_channels:
         raise ModelError(
-            f"model's first conv takes {first.in_channels} channels but its metadata says {meta.in_channels}"
+            f"model's first conv takes {first.in_channels} channels but its metadata says {meta.net_channels}"
         )
     out = copy.deepcopy(model).eval()
-    if first.in_channels == 1:
+    if meta.in_channels == 1:
         return out, meta
+    n_depth = meta.in_channels
     conv = nn.Conv2d(
-        1,
+        1 + len(meta.cues),
         first.out_channels,
         kernel_size=first.kernel_size,
         stride=first.stride,
@@ -46,7 +50,8 @@ def to_single_channel(model: FCN8s, meta: ModelMeta) -> tuple[FCN8s, ModelMeta]:
         bias=first.bias is not None,
     )
     with torch.no_grad():
-        conv.weight.copy_(first.weight.sum(dim=1, keepdim=True))
+        w = first.weight
+        conv.weight.copy_(torch.cat([w[:, :n_depth].sum(dim=1, keepdim=True), w[:, n_depth:]], dim=1))
         if first.bias is not None:
             conv.bias.copy_(first.bias)
     out.encoder.features[0] = conv

@@ -18,9 +18,13 @@ parameter below says which fact of ``shared/SENSOR.md`` (or of the real capture 
    as phasors at the 60.24 MHz modulation frequency, so a pixel straddling an edge reads a
    range between the two surfaces, pulled towards the brighter one (a flying pixel).
    The complex return is then blurred with a small Gaussian point-spread function (lens blur
-   and Royale's spatial filter): in the real capture 46 % of the pixels within 2 px of a depth
-   step read in between the two sides, against 20 % with in-pixel supersampling alone; sigma
-   0.9 px gives 47 % on simulated frames, so sigma is drawn per frame from 0.7-1.1 px.
+   and Royale's spatial filter), sigma drawn per frame from 0-0.4 px. An earlier fit (0.7-1.1 px,
+   matching "46 % of the pixels within 2 px of a depth step read in between") gave 189 +- 135
+   sharp-edge pixels (4-neighbour step > 18 mm) per frame against 1240 in the real capture, and
+   a model trained on it painted a 1-2 px halo around objects on real and BlenSor frames
+   (issue 9). With 0-0.4 px, 8-12 objects at 30 cm (``tools/sim_vs_real.py --config``): 794 +-
+   224 sharp-edge pixels and 0.175 invalid edge pixels per valid edge pixel (real: 0.173); 0 px
+   is BlenSor's crisp edge.
    Multipath: floor pixels near tall objects read long (or short) by up to ~1 cm, in proportion
    to the object height around them (a blurred height map).
 5. Invalid: amplitude below ``amplitude_min`` (the corners, dark or grazing surfaces), above
@@ -71,9 +75,10 @@ class SensorConfig:
     noise_scale: tuple[float, float] = (0.7, 1.4)  # per-frame noise level factor
     smoothing: float = 2.5  # Royale's 3x3 filter reduces noise ~2.5x (SENSOR.md)
     correlated: bool = True  # noise blurred 3x3, as after Royale's filter
+    white_noise_prob: float = 0.0  # share of frames with white (uncorrelated) noise, as BlenSor's
     # 4. mixed pixels and multipath
     mixed_pixels: bool = True
-    psf_sigma_px: tuple[float, float] = (0.7, 1.1)  # per frame; lens blur + Royale's filter (fitted, see above)
+    psf_sigma_px: tuple[float, float] = (0.0, 0.4)  # per frame; crisp (BlenSor) to the real sensor (fitted, see above)
     modulation_hz: float = 60.24e6  # MODE_5_45FPS_500 (SENSOR.md)
     multipath_gain: tuple[float, float] = (-0.03, 0.12)  # per frame: metres of bias per metre of nearby height
     multipath_radius_m: float = 0.04
@@ -101,6 +106,7 @@ class SensorConfig:
         check_number("sensor.amplitude_ref", self.amplitude_ref, 1e-6)
         check_range("sensor.noise_scale", self.noise_scale, 0.0, 100.0)
         check_number("sensor.smoothing", self.smoothing, 0.1, 100.0)
+        check_number("sensor.white_noise_prob", self.white_noise_prob, 0.0, 1.0)
         check_range("sensor.psf_sigma_px", self.psf_sigma_px, 0.0, 10.0)
         check_number("sensor.modulation_hz", self.modulation_hz, 1e5, 1e10)
         check_range("sensor.multipath_gain", self.multipath_gain, -10.0, 10.0)
@@ -150,6 +156,7 @@ class FrameDraw:
     multipath_gain: float
     cone_half_angle_deg: float
     psf_sigma_px: float = 0.0
+    white_noise: bool = False
 
     def to_params(self) -> dict[str, Any]:
         return {
@@ -160,6 +167,7 @@ class FrameDraw:
             "multipath_gain": round(self.multipath_gain, 5),
             "cone_half_angle_deg": round(self.cone_half_angle_deg, 4),
             "psf_sigma_px": round(self.psf_sigma_px, 4),
+            "white_noise": self.white_noise,
         }
 
 
@@ -177,6 +185,8 @@ def draw_frame_params(rng: np.random.Generator, cfg: SensorConfig, n_objects: in
         multipath_gain=_u(rng, cfg.multipath_gain),
         cone_half_angle_deg=_u(rng, cfg.cone_half_angle_deg),
         psf_sigma_px=_u(rng, cfg.psf_sigma_px),
+        # drawn only when enabled, so that default frames keep their random stream
+        white_noise=bool(cfg.white_noise_prob > 0 and rng.random() < cfg.white_noise_prob),
     )
 
 
@@ -283,7 +293,7 @@ def apply_sensor(
         r_meas, amp = _psf(r_meas, amp, hit, draw.psf_sigma_px, 4.0 * math.pi * cfg.modulation_hz / _C)
 
     noise = rng.standard_normal((h, w), dtype=np.float32)
-    if cfg.correlated:
+    if cfg.correlated and not draw.white_noise:
         noise = _box3(noise) * 3.0  # unit variance again, correlated over 3x3
     sigma = np.maximum(
         cfg.sigma_min_m, cfg.sigma_ref_m * draw.noise_scale * np.sqrt(cfg.amplitude_ref / np.maximum(amp, 1e-6))

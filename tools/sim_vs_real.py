@@ -87,12 +87,14 @@ def real_frame(path: Path) -> tuple[np.ndarray, tuple[float, float, float, float
     return cap.depth, k
 
 
-def sim_frames(seed: int, n: int, height: float):
-    """(frame, objects) of the default Table I configuration with the camera at ``height``."""
-    from sim.generate import SimConfig, generate_frame
-    from sim.scene import SceneConfig
+def sim_frames(seed: int, n: int, height: float, config: Path | None = None):
+    """(frame, objects) of the default Table I configuration (or ``config``), camera at ``height``."""
+    import json
 
-    cfg = SimConfig(scene=replace(SceneConfig(), camera_height_m=(height, height)))
+    from sim.generate import SimConfig, generate_frame
+
+    base = SimConfig.from_dict(json.loads(config.read_text())) if config else SimConfig()
+    cfg = replace(base, scene=replace(base.scene, camera_height_m=(height, height)))
     for i in range(n):
         f = generate_frame(i, seed, cfg)
         yield f, len(f.scene["params"]["objects"])
@@ -225,6 +227,7 @@ parser.add_argument(
     help="show the first sim frame with MIN..MAX objects, like the real scene's ~9 (default 6 12)",
 )
 parser.add_argument("--height", type=float, default=REAL_HEIGHT_M, help="sim camera height in m (default 0.30)")
+parser.add_argument("--config", type=Path, help="simulator config JSON (as depthseg-sim --config; default: defaults)")
 parser.add_argument("--png", type=Path, default=ROOT / "docs" / "sim_vs_real.png", help="figure output")
 parser.add_argument("--md", type=Path, default=ROOT / "docs" / "sim_vs_real.md", help="markdown output")
 parser.add_argument("--json", action="store_true", help="print all numbers as one JSON object instead of the table")
@@ -244,13 +247,13 @@ def main(argv: list[str] | None = None) -> int:
         real_depth, real_k = real_frame(args.real)
         real = _flat(realism(real_depth, real_k), real_depth.size)
         many, shown, shown_frame = [], None, None
-        for f, n_obj in sim_frames(args.seed, args.frames, args.height):
+        for f, n_obj in sim_frames(args.seed, args.frames, args.height, args.config):
             m = _flat(realism(f.depth, f.intrinsics, seed=f.index), f.depth.size)
             many.append(m)
             if shown is None and args.objects[0] <= n_obj <= args.objects[1]:
                 shown, shown_frame = m, f
         if shown is None:  # no frame had enough objects: show the first
-            shown_frame = next(sim_frames(args.seed, 1, args.height))[0]
+            shown_frame = next(sim_frames(args.seed, 1, args.height, args.config))[0]
             shown = many[0]
         idx = shown_frame.index
         md_table = table(real, shown, idx, many)

@@ -46,7 +46,7 @@ def test_masked_bce_ignores_masked_pixels() -> None:
 
 def test_make_batch_masks_padding_and_invalid_pixels() -> None:
     fs = _frames(2)
-    x, t, m = make_batch(fs, np.array([0, 1]), channels=3, multiple=32)
+    x, t, m = make_batch(fs, np.array([0, 1]), ModelMeta(in_channels=3, pad_multiple=32))
     assert x.shape == (2, 3, 64, 64) and t.shape == m.shape == (2, 1, 64, 64)
     assert m[:, :, 40:, :].sum() == 0 and m[:, :, :, 56:].sum() == 0  # padding never reaches the loss
     assert m[0, 0, 0, 0] == 0  # dead corner pixel excluded

@@ -1,0 +1,189 @@
+"""Input cues beside standardised depth: height above the dominant plane, robust statistics.
+
+Why a height cue: a robotics engineer's first tool is a floor-plane fit, and it wins wherever
+the learned model has memorised the simulator's sensor instead of the geometry (issue 9: a 1-2 px
+halo of false object pixels on BlenSor scans and real captures). Giving the network the height
+above a robustly fitted dominant plane lets it start from that geometry and spend its capacity on
+what a plane fit cannot do (thin objects in noise, edges, trays, table edges).
+
+How, cheaply and without intrinsics: for a pinhole camera a plane n.X = d seen at pixel (u, v)
+has inverse depth ``1 / Z = a u + b v + c``: affine in the pixel coordinates, whatever the
+focal length. So the plane is fitted in (u, v, 1/Z) on a sparse pixel grid:
+
+1. RANSAC with a fixed table of ``N_HYPOTHESES`` point triplets (fractions of the valid-point
+   count, drawn once from a fixed seed): deterministic, and the same table is a constant in the
+   ``--with-preprocessing`` ONNX graph.
+2. Score = inliers (|Z - Z_plane| < ``INLIER_M``) - ``BEYOND_WEIGHT`` x points more than
+   ``BEYOND_M`` *behind* the plane: a support surface has nothing under it in view, so a box top
+   (with the floor visible behind it) loses to the floor even when it covers more pixels.
+3. Two least-squares refinements on the inliers, in inverse depth.
+
+The cue is ``HEIGHT_SCALE`` x (Z_plane - Z) (centimetres above the plane along the optical axis),
+clipped to ``HEIGHT_CLIP``, 0 at invalid pixels. Without a plane (fewer than ``MIN_POINTS`` valid
+grid points, or no usable hypothesis) the plane is the constant median depth.
+
+Numpy only: this module is on the edge path and must not import torch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = [
+    "CUES",
+    "PlaneFit",
+    "fit_dominant_plane",
+    "height_cue",
+    "robust_mean_std",
+    "GRID_STRIDE",
+    "N_HYPOTHESES",
+]
+
+CUES = ("height",)  # the cue channels a model may ask for, in ModelMeta.cues
+
+GRID_STRIDE = 6  # sparse grid for the fit: 29 x 38 points on a 171 x 224 frame
+N_HYPOTHESES = 64
+MIN_POINTS = 12
+INLIER_M = 0.008  # the baseline's 8 mm: noise of the sensor (SENSOR.md) and BlenSor's 4 mm sigma
+BEYOND_M = 0.03
+BEYOND_WEIGHT = 0.5
+REFINE_ITERS = 2
+HEIGHT_SCALE = 100.0  # metres -> centimetres
+HEIGHT_CLIP = (-10.0, 30.0)
+TRIM = (0.01, 0.99)  # robust standardisation: quantiles kept
+STATS_STRIDE = 4  # robust standardisation reads every 4th pixel in each direction
+
+
+@lru_cache(maxsize=1)
+def hypothesis_table() -> np.ndarray:
+    """(N_HYPOTHESES, 3) fractions in [0, 1): point i of a triplet is floor(f * n_points)."""
+    return np.random.default_rng(20261130).random((N_HYPOTHESES, 3))
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """Inverse depth ``1/Z = a * u + b * v + c`` (u, v in pixels); ``ok`` False = fallback."""
+
+    a: float
+    b: float
+    c: float
+    ok: bool
+    inlier_share: float
+
+    def depth(self, shape: tuple[int, int]) -> np.ndarray:
+        """Plane depth Z at every pixel (float64); inf where the plane lies behind the camera."""
+        h, w = shape
+        inv = (np.float32(self.a) * _arange(w)[None, :] + np.float32(self.b) * _arange(h)[:, None]) + np.float32(self.c)
+        return 1.0 / np.maximum(inv, np.float32(1e-6))
+
+
+@lru_cache(maxsize=8)
+def _arange(n: int) -> np.ndarray:
+    return np.arange(n, dtype=np.float32)
+
+
+def _grid(depth: np.ndarray, valid: np.ndarray, stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    vv, uu = np.nonzero(valid[::stride, ::stride])
+    z = depth[::stride, ::stride][vv, uu].astype(np.float64)
+    return uu.astype(np.float64) * stride, vv.astype(np.float64) * stride, z
+
+
+def _solve3(u: np.ndarray, v: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Planes through point triplets (rows) by Cramer's rule: (a, b, c, ok)."""
+    u1, u2, u3 = u.T
+    v1, v2, v3 = v.T
+    q1, q2, q3 = q.T
+    det = u1 * (v2 - v3) - v1 * (u2 - u3) + (u2 * v3 - u3 * v2)
+    ok = np.abs(det) > 1.0  # pixel units: triplets spanning less than ~1 px^2 are degenerate
+    d = np.where(ok, det, 1.0)
+    a = (q1 * (v2 - v3) - v1 * (q2 - q3) + (q2 * v3 - q3 * v2)) / d
+    b = (u1 * (q2 - q3) - q1 * (u2 - u3) + (u2 * q3 - u3 * q2)) / d
+    c = (u1 * (v2 * q3 - v3 * q2) - v1 * (u2 * q3 - u3 * q2) + q1 * (u2 * v3 - u3 * v2)) / d
+    return a, b, c, ok
+
+
+def _lstsq(u: np.ndarray, v: np.ndarray, q: np.ndarray) -> tuple[float, float, float] | None:
+    if len(q) < 3:
+        return None
+    su, sv, n = u.sum(), v.sum(), float(len(u))
+    ata = np.array([[u @ u, u @ v, su], [u @ v, v @ v, sv], [su, sv, n]])
+    atq = np.array([u @ q, v @ q, q.sum()])
+    if abs(np.linalg.det(ata)) < 1e-9:
+        return None
+    sol = np.linalg.solve(ata, atq)
+    return float(sol[0]), float(sol[1]), float(sol[2])
+
+
+def fit_dominant_plane(depth: np.ndarray, valid: np.ndarray, stride: int = GRID_STRIDE) -> PlaneFit:
+    """The dominant support plane of one frame (see the module docstring for the rule).
+
+    Args:
+        depth: [H, W] Z in metres.
+        valid: [H, W] bool, pixels that returned a range.
+        stride: grid step of the sparse sample used for the fit.
+
+    Returns:
+        The fitted plane; ``ok`` is False when the frame has too few valid points, and the plane
+        is then the constant median depth of the valid pixels (or 1 m without any).
+    """
+    u, v, z = _grid(depth, valid, stride)
+    n = len(z)
+    if n < MIN_POINTS:
+        med = float(np.median(depth[valid])) if valid.any() else 1.0
+        return PlaneFit(0.0, 0.0, 1.0 / max(med, 1e-6), False, 0.0)
+    q = 1.0 / z
+    idx = np.minimum((hypothesis_table() * n).astype(np.int64), n - 1)
+    a, b, c, ok = _solve3(u[idx], v[idx], q[idx])
+    u32, v32, z32 = u.astype(np.float32), v.astype(np.float32), z.astype(np.float32)
+    inv = a.astype(np.float32)[:, None] * u32 + b.astype(np.float32)[:, None] * v32 + c.astype(np.float32)[:, None]
+    ok &= inv.min(axis=1) > 1e-6
+    r = z32 - 1.0 / np.maximum(inv, np.float32(1e-6))
+    score = np.count_nonzero(np.abs(r) < INLIER_M, axis=1) - BEYOND_WEIGHT * np.count_nonzero(r > BEYOND_M, axis=1)
+    score = np.where(ok, score, -np.inf)
+    best = int(np.argmax(score))
+    if not np.isfinite(score[best]):
+        med = float(np.median(z))
+        return PlaneFit(0.0, 0.0, 1.0 / med, False, 0.0)
+    plane = (float(a[best]), float(b[best]), float(c[best]))
+    inl = np.abs(r[best]) < INLIER_M
+    for _ in range(REFINE_ITERS):
+        sol = _lstsq(u[inl], v[inl], q[inl])
+        if sol is None:
+            break
+        inv1 = sol[0] * u + sol[1] * v + sol[2]
+        if np.any(inv1 <= 1e-6):
+            break
+        plane = sol
+        inl = np.abs(z - 1.0 / inv1) < INLIER_M
+    return PlaneFit(*plane, ok=True, inlier_share=float(inl.mean()))
+
+
+def height_cue(depth: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """float32 [H, W]: centimetres above the dominant plane, clipped; 0 at invalid pixels."""
+    fit = fit_dominant_plane(depth, valid)
+    zp = fit.depth(depth.shape)
+    d = np.where(valid, depth, zp).astype(np.float32)  # invalid pixels (NaN, inf, 0) -> height 0
+    h = np.clip((zp - d) * np.float32(HEIGHT_SCALE), *HEIGHT_CLIP)
+    return h.astype(np.float32, copy=False)
+
+
+def robust_mean_std(depth: np.ndarray, valid: np.ndarray, std_floor: float) -> tuple[float, float]:
+    """Mean and std of the valid pixels between the 1st and 99th percentile (sparse grid).
+
+    Why: one valid pixel at 4 m, or 40 saturated 16-bit pixels (65.535 m), moved the plain
+    mean/std enough to flip half of the mask (issue 9). Trimming 1 % on each side keeps the
+    statistics of the scene; the grid keeps it cheap.
+    """
+    vals = depth[::STATS_STRIDE, ::STATS_STRIDE][valid[::STATS_STRIDE, ::STATS_STRIDE]].astype(np.float64)
+    if len(vals) < MIN_POINTS:
+        vals = depth[valid].astype(np.float64)
+    if len(vals) == 0:
+        return 0.0, 1.0
+    lo, hi = np.quantile(vals, TRIM)
+    core = vals[(vals >= lo) & (vals <= hi)]
+    if len(core) == 0:
+        core = vals
+    return float(core.mean()), max(float(core.std()), std_floor)
