@@ -133,7 +133,7 @@ def _settle(
             last = str(exc)
             continue
         info = {"attempts": attempt + 1, "steps": res.steps, "time_s": round(res.time_s, 4), "at_rest": res.at_rest}
-        return scene, res.pos, res.quat, info
+        return scene, scene.rest_on_support(res.pos), res.quat, info
     scene = sample_scene(rng, replace(config.scene, n_objects=(0, 0)), None)
     info = {"attempts": int(config.physics.max_attempts), "fallback": "empty scene", "last_error": last}
     return scene, np.zeros((0, 3)), np.zeros((0, 4)), info
@@ -162,6 +162,8 @@ def generate_frame(
         scene.camera_position,
         supersample=config.supersample_edges and config.sensor.mixed_pixels,
         threads=config.render_threads,
+        support=scene.render_support(),
+        background=scene.background_meshes(),
     )
     draw = draw_frame_params(sensor_rng, config.sensor, len(scene.objects))
     out = apply_sensor(rr, ray_grid(cam), cam.fx, scene.camera_height, draw, config.sensor, sensor_rng)

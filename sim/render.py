@@ -19,6 +19,12 @@ supersampled (a rotated-grid pattern of sub-rays); the sensor model blends those
 
 Speed: the floor is the plane z = 0 and is intersected analytically; only the rays inside the
 projected bounding boxes of the objects go to Embree (typically a third of the frame).
+
+Supports other than the infinite plane (scene families where a floor-plane fit fails): a
+`Support` makes the table gently curved (z = k (x^2 + y^2), an analytic ray-paraboloid hit)
+and/or gives it a straight edge beyond which rays fall to a lower room floor z = -drop; both
+are background. Background meshes (tray walls) are cast with the objects but get FLOOR_ID,
+so they are labelled 0 like the table they stand on.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import numpy as np
 from edge.errors import ConfigError
 from edge.meta import SensorSpec
 
-__all__ = ["Camera", "RayGrid", "RenderResult", "ray_grid", "render", "FLOOR_ID", "NO_HIT"]
+__all__ = ["Camera", "RayGrid", "RenderResult", "Support", "ray_grid", "render", "FLOOR_ID", "NO_HIT"]
 
 FLOOR_ID = 0  # ids: 0 floor, k + 1 object k, NO_HIT nothing
 NO_HIT = -1
@@ -91,7 +97,7 @@ def _normalised(cam: Camera, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, 
     return und[:, 0].reshape(u.shape), und[:, 1].reshape(u.shape)
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=16)
 def ray_grid(cam: Camera) -> RayGrid:
     """Per-pixel ray directions (cached per camera: computed once per worker)."""
     v, u = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float64)
@@ -148,6 +154,70 @@ def _floor(origin: np.ndarray, dirs: np.ndarray, norm: np.ndarray):
     return t, ids, (np.abs(dz) / norm).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class Support:
+    """The table, when it is not the infinite plane z = 0 (all of it is background).
+
+    ``curvature`` k: the table top is z = k (x^2 + y^2) (k > 0 a shallow bowl, k < 0 a dome).
+    ``edge_normal`` (unit, xy) and ``edge_dist``: the table ends where p . n > edge_dist; there
+    rays continue to the room floor z = -``drop``. The camera must be above the table (p . n <
+    edge_dist at the camera), so the table's side face, which faces away from it, is never seen.
+    """
+
+    curvature: float = 0.0
+    edge_normal: tuple[float, float] | None = None
+    edge_dist: float = 0.0
+    drop: float = 0.0
+
+
+def _top_hit(origin: np.ndarray, d: np.ndarray, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """First hit t (inf: none) of rays with the table top z = k (x^2 + y^2), and its normals."""
+    ox, oy, oz = (float(c) for c in origin)
+    if k == 0.0:
+        dz = d[:, 2]
+        down = dz < -1e-12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(down, -oz / np.where(down, dz, -1.0), np.inf)
+        return t, np.broadcast_to(np.array([0.0, 0.0, 1.0]), d.shape)
+    a = k * (d[:, 0] ** 2 + d[:, 1] ** 2)
+    b = 2 * k * (ox * d[:, 0] + oy * d[:, 1]) - d[:, 2]
+    c = k * (ox * ox + oy * oy) - oz
+    disc = b * b - 4 * a * c
+    ok = disc >= 0
+    q = -0.5 * (b + np.copysign(np.sqrt(np.where(ok, disc, 0.0)), b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1 = np.where(np.abs(a) > 1e-15, q / a, np.inf)
+        r2 = np.where(np.abs(q) > 1e-15, c / q, np.inf)
+    r1 = np.where(ok & (r1 > 1e-9), r1, np.inf)
+    r2 = np.where(ok & (r2 > 1e-9), r2, np.inf)
+    t = np.minimum(r1, r2)
+    tt = np.where(np.isfinite(t), t, 0.0)
+    px, py = ox + tt * d[:, 0], oy + tt * d[:, 1]
+    n = np.stack([-2 * k * px, -2 * k * py, np.ones_like(px)], -1)
+    return t, n
+
+
+def _support(origin: np.ndarray, dirs: np.ndarray, norm: np.ndarray, sup: Support | None):
+    """Like `_floor` (t, ids, |cos|) for a curved and/or edged table; `_floor` when None."""
+    if sup is None:
+        return _floor(origin, dirs, norm)
+    d = dirs.astype(np.float64)
+    t, n = _top_hit(origin, d, float(sup.curvature))
+    cos = np.abs(np.einsum("ij,ij->i", n, d)) / (np.linalg.norm(n, axis=1) * norm)
+    if sup.edge_normal is not None:
+        ex, ey = sup.edge_normal
+        tt = np.where(np.isfinite(t), t, 0.0)
+        side = (origin[0] + tt * d[:, 0]) * ex + (origin[1] + tt * d[:, 1]) * ey
+        off = ~np.isfinite(t) | (side > sup.edge_dist)  # missed the table or hit beyond its edge
+        down = d[:, 2] < -1e-12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_low = np.where(down, -(float(origin[2]) + sup.drop) / np.where(down, d[:, 2], -1.0), np.inf)
+        t = np.where(off, t_low, t)
+        cos = np.where(off, np.abs(d[:, 2]) / norm, cos)
+    ids = np.where(np.isfinite(t), FLOOR_ID, NO_HIT).astype(np.int32)
+    return t.astype(np.float32), ids, cos.astype(np.float32)
+
+
 def _candidates(meshes, cam: Camera, grid: RayGrid, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """Pixels whose ray may hit an object: inside the bounding box of its projected vertices.
 
@@ -178,6 +248,11 @@ def _candidates(meshes, cam: Camera, grid: RayGrid, rot: np.ndarray, origin: np.
     return np.flatnonzero(mask)
 
 
+def _mesh_ids(gid: np.ndarray, n_obj: int) -> np.ndarray:
+    """Pixel ids of Embree geometry ids: object k -> k + 1, background meshes -> FLOOR_ID."""
+    return np.where(gid < n_obj, gid + 1, FLOOR_ID).astype(np.int32)
+
+
 def render(
     meshes: list[tuple[np.ndarray, np.ndarray]],
     cam: Camera,
@@ -186,11 +261,14 @@ def render(
     edge_jump_m: float = 0.004,
     supersample: bool = True,
     threads: int = 1,
+    support: Support | None = None,
+    background: list[tuple[np.ndarray, np.ndarray]] | tuple = (),
 ) -> RenderResult:
     """Cast one frame. ``meshes`` are (vertices, triangles) in world coordinates, floor at z = 0.
 
     ``rotation`` is world-from-camera, ``position`` the camera centre in the world. The floor
-    is intersected analytically; only rays that may meet an object are cast.
+    (or the ``support``) is intersected analytically; only rays that may meet a mesh are cast.
+    ``background`` meshes (tray walls) are cast like objects but labelled FLOOR_ID.
     """
     import open3d as o3d
 
@@ -200,7 +278,9 @@ def render(
     origin = np.asarray(position, dtype=np.float64)
     norm = grid.norm.ravel()
     dirs_w = (grid.dirs.reshape(-1, 3) @ rot.T.astype(np.float32)).astype(np.float32)
-    z, ids, cos = _floor(origin, dirs_w, norm)
+    z, ids, cos = _support(origin, dirs_w, norm, support)
+    n_obj = len(meshes)
+    meshes = list(meshes) + list(background)
     scene = None
     if meshes:
         scene = o3d.t.geometry.RaycastingScene(nthreads=threads)
@@ -215,7 +295,7 @@ def render(
             nearer = t < z[cand]
             sel = cand[nearer]
             z[sel] = t[nearer]
-            ids[sel] = gid[nearer] + 1
+            ids[sel] = _mesh_ids(gid[nearer], n_obj)
             cos[sel] = c[nearer]
     hit = ids != NO_HIT
     height = np.where(hit, origin[2] + np.where(hit, z, 0.0) * dirs_w[:, 2], 0.0).astype(np.float32)
@@ -225,7 +305,7 @@ def render(
     z2, r2, ids2 = z.reshape(h, w), r.reshape(h, w), ids.reshape(h, w)
     s = grid.sub_dirs.shape[2]
     edge = np.zeros(0, dtype=np.int64)
-    if supersample and scene is not None:
+    if supersample and (scene is not None or support is not None):
         edge_mask = np.zeros((h, w), dtype=bool)
         for a, b in (((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
                      ((slice(1, None), slice(None)), (slice(None, -1), slice(None)))):
@@ -237,12 +317,13 @@ def render(
         sub = grid.sub_dirs.reshape(-1, s, 3)[edge].reshape(-1, 3)
         sub_norm = np.linalg.norm(sub, axis=1)
         sub_w = (sub @ rot.T.astype(np.float32)).astype(np.float32)
-        sz, sids, scos = _floor(origin, sub_w, sub_norm)
-        t, gid, c = _cast(scene, origin.astype(np.float32), sub_w, sub_norm, threads)
-        nearer = t < sz
-        sz = np.where(nearer, t, sz)
-        sids = np.where(nearer, gid + 1, sids)
-        scos = np.where(nearer, c, scos)
+        sz, sids, scos = _support(origin, sub_w, sub_norm, support)
+        if scene is not None:
+            t, gid, c = _cast(scene, origin.astype(np.float32), sub_w, sub_norm, threads)
+            nearer = t < sz
+            sz = np.where(nearer, t, sz)
+            sids = np.where(nearer, _mesh_ids(gid, n_obj), sids)
+            scos = np.where(nearer, c, scos)
         sz = np.where(sids != NO_HIT, sz, 0.0)
         sub_r = (sz * sub_norm).reshape(-1, s)
         sub_ids, sub_cos = sids.reshape(-1, s), scos.reshape(-1, s)

@@ -199,6 +199,9 @@ class SceneConfig:
     thin_fraction: float = 0.0  # share of objects drawn flat (coins, plates, rings, flat tools)
     thin_thickness_m: tuple[float, float] = (0.003, 0.008)  # their thickness; ignores min_thickness_m
     thin_shapes: tuple[str, ...] = THIN_KINDS
+    table_edge_prob: float = 0.0  # per frame: the table ends in a straight edge ...
+    table_edge_dist_m: tuple[float, float] = (0.09, 0.2)  # ... this far from the scene centre ...
+    floor_drop_m: tuple[float, float] = (0.25, 0.8)  # ... with the room floor this far below
 
     def __post_init__(self) -> None:
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
@@ -255,6 +258,15 @@ class SceneConfig:
         bad = [s for s in self.thin_shapes if s not in THIN_KINDS]
         if not self.thin_shapes or bad:
             raise ConfigError(f"scene.thin_shapes: unknown {bad or 'empty list'}; choose from {list(THIN_KINDS)}")
+        check_number("scene.table_edge_prob", self.table_edge_prob, 0.0, 1.0)
+        check_range("scene.table_edge_dist_m", self.table_edge_dist_m, 0.0, 10.0)
+        check_range("scene.floor_drop_m", self.floor_drop_m, 0.01, 10.0)
+        reach = max(abs(float(v)) for v in self.object_xy_m)
+        if self.table_edge_prob > 0 and self.table_edge_dist_m[0] <= reach:
+            raise ConfigError(
+                f"scene.table_edge_dist_m min {self.table_edge_dist_m[0]} must exceed the object_xy_m reach "
+                f"{reach}; raise it so objects are dropped onto the table"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         """Family keys at their defaults are left out, so old configs keep their digest."""
@@ -271,7 +283,14 @@ class SceneConfig:
 
 _FAMILY_DEFAULTS = {
     k: (list(v) if isinstance(v, tuple) else v)
-    for k, v in {"thin_fraction": 0.0, "thin_thickness_m": (0.003, 0.008), "thin_shapes": THIN_KINDS}.items()
+    for k, v in {
+        "thin_fraction": 0.0,
+        "thin_thickness_m": (0.003, 0.008),
+        "thin_shapes": THIN_KINDS,
+        "table_edge_prob": 0.0,
+        "table_edge_dist_m": (0.09, 0.2),
+        "floor_drop_m": (0.25, 0.8),
+    }.items()
 }
 
 
@@ -289,6 +308,43 @@ class ObjectSpec:
     euler: tuple[float, float, float]
 
 
+@dataclass
+class TableEdge:
+    """A straight table edge: the table is {p : p . (cos a, sin a) <= dist_m}; beyond it, the
+    room floor lies drop_m lower. ``drawn_dist_m`` is the drawn distance; ``dist_m`` may be
+    pushed out after the drop so that no resting object centre (or tray) hangs in the air."""
+
+    angle_rad: float
+    dist_m: float
+    drop_m: float
+    drawn_dist_m: float
+
+    @property
+    def normal(self) -> tuple[float, float]:
+        return (math.cos(self.angle_rad), math.sin(self.angle_rad))
+
+    def to_params(self) -> dict[str, Any]:
+        return {
+            "angle_rad": round(self.angle_rad, 6),
+            "dist_m": round(self.dist_m, 6),
+            "drawn_dist_m": round(self.drawn_dist_m, 6),
+            "floor_drop_m": round(self.drop_m, 6),
+        }
+
+
+@dataclass
+class SupportSpec:
+    """What the objects stand on when a support family is enabled (None fields: not drawn)."""
+
+    table_edge: TableEdge | None = None
+
+    def to_params(self) -> dict[str, Any]:
+        return {"table_edge": None if self.table_edge is None else self.table_edge.to_params()}
+
+
+_EDGE_MARGIN_M = 0.01  # resting object centres stay at least this far inside the table edge
+
+
 @dataclass(eq=False)
 class SceneSpec:
     camera_height: float
@@ -297,6 +353,7 @@ class SceneSpec:
     tilt_x: float
     tilt_y: float
     objects: list[ObjectSpec]
+    support: SupportSpec | None = None  # None: no support family enabled, the plane z = 0
 
     @property
     def camera_position(self) -> np.ndarray:
@@ -306,9 +363,38 @@ class SceneSpec:
     def camera_rotation(self) -> np.ndarray:
         return camera_rotation(self.yaw, self.tilt_x, self.tilt_y)
 
+    def rest_on_support(self, pos: np.ndarray) -> np.ndarray:
+        """Resting positions on the real support (physics drops onto the plane z = 0).
+
+        Pushes a table edge out past every resting object centre, so nothing floats beyond it.
+        """
+        if self.support is None:
+            return pos
+        edge = self.support.table_edge
+        if edge is not None and len(pos):
+            reach = float((pos[:, :2] @ np.asarray(edge.normal)).max()) + _EDGE_MARGIN_M
+            edge.dist_m = max(edge.dist_m, reach)
+        return pos
+
+    def render_support(self) -> Any:
+        """The `sim.render.Support` to cast against, or None for the plain floor plane."""
+        from sim.render import Support
+
+        sup = self.support
+        if sup is None or sup.table_edge is None:
+            return None
+        e = sup.table_edge
+        return Support(edge_normal=e.normal, edge_dist=e.dist_m, drop=e.drop_m)
+
+    def background_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """World-frame meshes that are background (label 0) but not the analytic support."""
+        return []
+
     def to_params(self) -> dict[str, Any]:
         """JSON-ready description (release poses; physics adds the resting poses)."""
+        extra = {} if self.support is None else {"support": self.support.to_params()}
         return {
+            **extra,
             "camera": {
                 "height_m": round(self.camera_height, 6),
                 "xy_m": [round(v, 6) for v in self.camera_xy],
@@ -375,11 +461,26 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
         z = k * cfg.drop_step_m + cfg.drop_clearance_m - lowest
         pos = np.array([_u(rng, cfg.object_xy_m), _u(rng, cfg.object_xy_m), z])
         objects.append(ObjectSpec(shape, pos, q, _u(rng, cfg.density_kg_m3), euler))
-    return SceneSpec(
-        camera_height=_u(rng, cfg.camera_height_m),
-        camera_xy=(float(cfg.camera_xy_m[0]), float(cfg.camera_xy_m[1])),
-        yaw=_u(rng, cfg.camera_yaw_rad),
-        tilt_x=_u(rng, cfg.camera_tilt_rad),
-        tilt_y=_u(rng, cfg.camera_tilt_rad),
-        objects=objects,
-    )
+    camera = {
+        "camera_height": _u(rng, cfg.camera_height_m),
+        "camera_xy": (float(cfg.camera_xy_m[0]), float(cfg.camera_xy_m[1])),
+        "yaw": _u(rng, cfg.camera_yaw_rad),
+        "tilt_x": _u(rng, cfg.camera_tilt_rad),
+        "tilt_y": _u(rng, cfg.camera_tilt_rad),
+    }
+    return SceneSpec(**camera, objects=objects, support=_sample_support(rng, cfg))
+
+
+def _support_enabled(cfg: SceneConfig) -> bool:
+    return cfg.table_edge_prob > 0
+
+
+def _sample_support(rng: np.random.Generator, cfg: SceneConfig) -> SupportSpec | None:
+    """Per-frame support draws, after every Table I draw (the default stream is untouched)."""
+    if not _support_enabled(cfg):
+        return None
+    sup = SupportSpec()
+    if cfg.table_edge_prob > 0 and rng.random() < cfg.table_edge_prob:
+        dist = _u(rng, cfg.table_edge_dist_m)
+        sup.table_edge = TableEdge(float(rng.uniform(-_PI, _PI)), dist, _u(rng, cfg.floor_drop_m), dist)
+    return sup

@@ -85,3 +85,27 @@ def test_family_configs_validate_and_have_no_sensor_section():
         d = json.loads(p.read_text())
         assert set(d) == {"scene"}, p.name  # the sensor section is merged in elsewhere
         assert SimConfig.from_dict(d).digest() != SimConfig().digest(), p.name
+
+
+def test_beyond_the_table_edge_is_far_background():
+    cfg = SimConfig.from_dict({"scene": {
+        "n_objects": [2, 4], "table_edge_prob": 1.0, "table_edge_dist_m": [0.1, 0.1],
+        "floor_drop_m": [0.5, 0.5], "camera_height_m": [0.35, 0.35]}})
+    for i in range(3):
+        f = generate_frame(i, 3, cfg)
+        edge = f.scene["params"]["support"]["table_edge"]
+        assert edge["floor_drop_m"] == 0.5 and edge["dist_m"] >= 0.1
+        z = _world_z(f, cfg)
+        low = (f.clean > 0) & (z < -0.25)
+        assert low.sum() > 500  # the room floor is in view ...
+        np.testing.assert_allclose(z[low], -0.5, atol=2e-3)  # ... half a metre down
+        assert not f.label[low].any()  # ... and background
+        assert f.clean[low].min() > 0.8
+        table = (f.label == 0) & (f.clean > 0) & ~low
+        np.testing.assert_allclose(z[table], 0.0, atol=2e-4)
+
+
+def test_table_edge_must_clear_the_object_area():
+    with pytest.raises(ConfigError, match="scene.table_edge_dist_m min 0.05 must exceed"):
+        SceneConfig(table_edge_prob=0.5, table_edge_dist_m=(0.05, 0.2))
+    SceneConfig(table_edge_dist_m=(0.05, 0.2))  # fine while the family is off
