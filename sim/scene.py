@@ -176,6 +176,9 @@ def _to_dict(obj: Any) -> dict[str, Any]:
 # --------------------------------------------------------------------------- scene configuration
 
 
+_MAX_CURVATURE = 1.0  # 1/m: at most 2.25 cm of sag 15 cm from the centre; physics assumes a flat table
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     """What a scene may contain. Defaults: the paper's Table I (see the module docstring)."""
@@ -202,6 +205,7 @@ class SceneConfig:
     table_edge_prob: float = 0.0  # per frame: the table ends in a straight edge ...
     table_edge_dist_m: tuple[float, float] = (0.09, 0.2)  # ... this far from the scene centre ...
     floor_drop_m: tuple[float, float] = (0.25, 0.8)  # ... with the room floor this far below
+    support_curvature: tuple[float, float] = (0.0, 0.0)  # per frame k of a table z = k (x^2 + y^2), 1/m
 
     def __post_init__(self) -> None:
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
@@ -261,6 +265,7 @@ class SceneConfig:
         check_number("scene.table_edge_prob", self.table_edge_prob, 0.0, 1.0)
         check_range("scene.table_edge_dist_m", self.table_edge_dist_m, 0.0, 10.0)
         check_range("scene.floor_drop_m", self.floor_drop_m, 0.01, 10.0)
+        check_range("scene.support_curvature", self.support_curvature, -_MAX_CURVATURE, _MAX_CURVATURE)
         reach = max(abs(float(v)) for v in self.object_xy_m)
         if self.table_edge_prob > 0 and self.table_edge_dist_m[0] <= reach:
             raise ConfigError(
@@ -290,6 +295,7 @@ _FAMILY_DEFAULTS = {
         "table_edge_prob": 0.0,
         "table_edge_dist_m": (0.09, 0.2),
         "floor_drop_m": (0.25, 0.8),
+        "support_curvature": (0.0, 0.0),
     }.items()
 }
 
@@ -337,9 +343,17 @@ class SupportSpec:
     """What the objects stand on when a support family is enabled (None fields: not drawn)."""
 
     table_edge: TableEdge | None = None
+    curvature: float = 0.0  # table top z = k (x^2 + y^2); 0 = flat
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Height of the table top at world (x, y) points (N, 2)."""
+        return self.curvature * np.sum(np.asarray(xy, np.float64) ** 2, axis=-1)
 
     def to_params(self) -> dict[str, Any]:
-        return {"table_edge": None if self.table_edge is None else self.table_edge.to_params()}
+        return {
+            "table_edge": None if self.table_edge is None else self.table_edge.to_params(),
+            "curvature_per_m": round(self.curvature, 6),
+        }
 
 
 _EDGE_MARGIN_M = 0.01  # resting object centres stay at least this far inside the table edge
@@ -374,6 +388,9 @@ class SceneSpec:
         if edge is not None and len(pos):
             reach = float((pos[:, :2] @ np.asarray(edge.normal)).max()) + _EDGE_MARGIN_M
             edge.dist_m = max(edge.dist_m, reach)
+        if self.support.curvature != 0.0 and len(pos):
+            pos = pos.copy()
+            pos[:, 2] += self.support.height(pos[:, :2])  # dropped on the flat plane: lift onto the curve
         return pos
 
     def render_support(self) -> Any:
@@ -381,10 +398,12 @@ class SceneSpec:
         from sim.render import Support
 
         sup = self.support
-        if sup is None or sup.table_edge is None:
+        if sup is None or (sup.table_edge is None and sup.curvature == 0.0):
             return None
         e = sup.table_edge
-        return Support(edge_normal=e.normal, edge_dist=e.dist_m, drop=e.drop_m)
+        if e is None:
+            return Support(curvature=sup.curvature)
+        return Support(curvature=sup.curvature, edge_normal=e.normal, edge_dist=e.dist_m, drop=e.drop_m)
 
     def background_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """World-frame meshes that are background (label 0) but not the analytic support."""
@@ -472,7 +491,7 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
 
 
 def _support_enabled(cfg: SceneConfig) -> bool:
-    return cfg.table_edge_prob > 0
+    return cfg.table_edge_prob > 0 or any(float(k) != 0.0 for k in cfg.support_curvature)
 
 
 def _sample_support(rng: np.random.Generator, cfg: SceneConfig) -> SupportSpec | None:
@@ -483,4 +502,6 @@ def _sample_support(rng: np.random.Generator, cfg: SceneConfig) -> SupportSpec |
     if cfg.table_edge_prob > 0 and rng.random() < cfg.table_edge_prob:
         dist = _u(rng, cfg.table_edge_dist_m)
         sup.table_edge = TableEdge(float(rng.uniform(-_PI, _PI)), dist, _u(rng, cfg.floor_drop_m), dist)
+    if any(float(k) != 0.0 for k in cfg.support_curvature):
+        sup.curvature = _u(rng, cfg.support_curvature)
     return sup

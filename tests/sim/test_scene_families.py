@@ -18,11 +18,16 @@ from sim.shapes import THIN_KINDS, make_thin_shape
 FAMILIES = Path(__file__).resolve().parents[2] / "tools" / "scene_families"
 
 
-def _world_z(f, cfg: SimConfig) -> np.ndarray:
-    """World height of every pixel's clean hit (from the recorded camera pose)."""
+def _world(f, cfg: SimConfig) -> np.ndarray:
+    """World point (H, W, 3) of every pixel's clean hit (from the recorded camera pose)."""
     cam = f.scene["params"]["camera"]
     r_wc = camera_rotation(cam["yaw_rad"], cam["tilt_x_rad"], cam["tilt_y_rad"])
-    return cam["height_m"] + f.clean * (ray_grid(cfg.camera).dirs @ r_wc.T)[..., 2]
+    origin = np.array([*cam["xy_m"], cam["height_m"]])
+    return origin + f.clean[..., None] * (ray_grid(cfg.camera).dirs @ r_wc.T)
+
+
+def _world_z(f, cfg: SimConfig) -> np.ndarray:
+    return _world(f, cfg)[..., 2]
 
 
 def test_family_keys_are_off_by_default_and_keep_the_digest():
@@ -40,6 +45,9 @@ def test_family_keys_are_off_by_default_and_keep_the_digest():
         ("thin_thickness_m", [0.008, 0.003], "above max"),
         ("thin_thickness_m", [0.003, 0.2], "scene.thin_thickness_m"),
         ("thin_shapes", ["disc", "spoon"], "scene.thin_shapes"),
+        ("support_curvature", [-3.0, 0.5], "scene.support_curvature: min -3.0 is below"),
+        ("table_edge_prob", -0.1, "scene.table_edge_prob"),
+        ("floor_drop_m", [0.5, 0.2], "above max"),
     ],
 )
 def test_bad_family_values_are_one_line_config_errors(key, value, match):
@@ -109,3 +117,19 @@ def test_table_edge_must_clear_the_object_area():
     with pytest.raises(ConfigError, match="scene.table_edge_dist_m min 0.05 must exceed"):
         SceneConfig(table_edge_prob=0.5, table_edge_dist_m=(0.05, 0.2))
     SceneConfig(table_edge_dist_m=(0.05, 0.2))  # fine while the family is off
+
+
+@pytest.mark.parametrize("k", [0.8, -0.8])
+def test_curved_support_changes_the_floor_depth(k):
+    cfg = SimConfig.from_dict({"scene": {"n_objects": [3, 3], "support_curvature": [k, k]}})
+    f = generate_frame(1, 9, cfg)
+    assert f.scene["params"]["support"]["curvature_per_m"] == k
+    p = _world(f, cfg)
+    bg = (f.label == 0) & (f.clean > 0)
+    sag = k * (p[..., 0] ** 2 + p[..., 1] ** 2)
+    np.testing.assert_allclose(p[..., 2][bg], sag[bg], atol=3e-4)  # background is the paraboloid
+    assert np.abs(sag[bg]).max() > 0.004  # ... which is visibly not a plane
+    flat = generate_frame(1, 9, SimConfig.from_dict({"scene": {"n_objects": [3, 3]}}))
+    for o, o0 in zip(f.scene["params"]["objects"], flat.scene["params"]["objects"], strict=True):
+        x, y, z = o0["rest_pos_m"]
+        assert o["rest_pos_m"][2] == pytest.approx(z + k * (x * x + y * y), abs=2e-6)  # lifted onto the curve
