@@ -92,6 +92,22 @@ class DropResult:
     at_rest: bool
 
 
+def _add_static_boxes(spec, scene: SceneSpec, cfg: PhysicsConfig) -> None:
+    """Fixed walls (a tray) on the world body: they collide with objects, never move."""
+    import mujoco
+
+    from sim.shapes import _quat_from_matrix
+
+    for half, centre, rot in scene.static_boxes():
+        g = spec.worldbody.add_geom()
+        g.type = mujoco.mjtGeom.mjGEOM_BOX
+        g.size = [float(v) for v in half]
+        g.pos = [float(v) for v in centre]
+        g.quat = list(_quat_from_matrix(rot))
+        g.friction = list(cfg.friction)
+        g.condim = 6
+
+
 def _build(scene: SceneSpec, cfg: PhysicsConfig):
     import mujoco
 
@@ -106,6 +122,7 @@ def _build(scene: SceneSpec, cfg: PhysicsConfig):
     floor.size = [2.0, 2.0, 0.1]
     floor.friction = list(cfg.friction)
     floor.condim = 6
+    _add_static_boxes(spec, scene, cfg)
     types = {
         "box": mujoco.mjtGeom.mjGEOM_BOX,
         "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,

@@ -206,6 +206,10 @@ class SceneConfig:
     table_edge_dist_m: tuple[float, float] = (0.09, 0.2)  # ... this far from the scene centre ...
     floor_drop_m: tuple[float, float] = (0.25, 0.8)  # ... with the room floor this far below
     support_curvature: tuple[float, float] = (0.0, 0.0)  # per frame k of a table z = k (x^2 + y^2), 1/m
+    tray_prob: float = 0.0  # per frame: objects are dropped into a tray whose walls are background
+    tray_inner_m: tuple[float, float] = (0.14, 0.24)  # inner side lengths (each side drawn alone)
+    tray_wall_height_m: tuple[float, float] = (0.02, 0.06)
+    tray_wall_thickness_m: tuple[float, float] = (0.003, 0.01)
 
     def __post_init__(self) -> None:
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
@@ -266,6 +270,10 @@ class SceneConfig:
         check_range("scene.table_edge_dist_m", self.table_edge_dist_m, 0.0, 10.0)
         check_range("scene.floor_drop_m", self.floor_drop_m, 0.01, 10.0)
         check_range("scene.support_curvature", self.support_curvature, -_MAX_CURVATURE, _MAX_CURVATURE)
+        check_number("scene.tray_prob", self.tray_prob, 0.0, 1.0)
+        check_range("scene.tray_inner_m", self.tray_inner_m, 0.02, 2.0)
+        check_range("scene.tray_wall_height_m", self.tray_wall_height_m, 0.001, 0.5)
+        check_range("scene.tray_wall_thickness_m", self.tray_wall_thickness_m, 0.0005, 0.1)
         reach = max(abs(float(v)) for v in self.object_xy_m)
         if self.table_edge_prob > 0 and self.table_edge_dist_m[0] <= reach:
             raise ConfigError(
@@ -296,6 +304,10 @@ _FAMILY_DEFAULTS = {
         "table_edge_dist_m": (0.09, 0.2),
         "floor_drop_m": (0.25, 0.8),
         "support_curvature": (0.0, 0.0),
+        "tray_prob": 0.0,
+        "tray_inner_m": (0.14, 0.24),
+        "tray_wall_height_m": (0.02, 0.06),
+        "tray_wall_thickness_m": (0.003, 0.01),
     }.items()
 }
 
@@ -339,11 +351,58 @@ class TableEdge:
 
 
 @dataclass
+class Tray:
+    """An open tray centred on the scene, yawed by ``yaw_rad``; its walls are background."""
+
+    inner_m: tuple[float, float]  # inner side lengths along the tray's x and y
+    wall_height_m: float
+    wall_thickness_m: float
+    yaw_rad: float
+
+    def walls(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Four static boxes (half sides, centre, world rotation); the x walls cover the corners."""
+        ax, ay = self.inner_m[0] / 2, self.inner_m[1] / 2
+        t, h = self.wall_thickness_m, self.wall_height_m
+        rot = _rz(self.yaw_rad)
+        boxes = [
+            ((t / 2, ay + t, h / 2), (s * (ax + t / 2), 0.0, h / 2)) for s in (1, -1)
+        ] + [((ax, t / 2, h / 2), (0.0, s * (ay + t / 2), h / 2)) for s in (1, -1)]
+        return [(np.array(half), rot @ np.array(c), rot) for half, c in boxes]
+
+    def corners(self) -> np.ndarray:
+        """Outer corners (4, 2) in world x, y."""
+        ox, oy = self.inner_m[0] / 2 + self.wall_thickness_m, self.inner_m[1] / 2 + self.wall_thickness_m
+        c = np.array([[ox, oy], [-ox, oy], [-ox, -oy], [ox, -oy]])
+        return c @ _rz(self.yaw_rad)[:2, :2].T
+
+    def keep_inside(self, obj: ObjectSpec) -> None:
+        """Move an object's release x, y so that it falls into the tray (centred if too big)."""
+        rot = _rz(self.yaw_rad)
+        verts = obj.shape.vertices.astype(np.float64) @ quat_to_matrix(obj.quat).T
+        local = (verts @ rot)[:, :2]  # vertex offsets in the tray frame
+        p = rot.T @ obj.pos
+        for i in range(2):
+            lo = -self.inner_m[i] / 2 - local[:, i].min()
+            hi = self.inner_m[i] / 2 - local[:, i].max()
+            p[i] = float(np.clip(p[i], lo, hi)) if lo <= hi else (lo + hi) / 2
+        obj.pos = rot @ p
+
+    def to_params(self) -> dict[str, Any]:
+        return {
+            "inner_m": [round(v, 6) for v in self.inner_m],
+            "wall_height_m": round(self.wall_height_m, 6),
+            "wall_thickness_m": round(self.wall_thickness_m, 6),
+            "yaw_rad": round(self.yaw_rad, 6),
+        }
+
+
+@dataclass
 class SupportSpec:
     """What the objects stand on when a support family is enabled (None fields: not drawn)."""
 
     table_edge: TableEdge | None = None
     curvature: float = 0.0  # table top z = k (x^2 + y^2); 0 = flat
+    tray: Tray | None = None
 
     def height(self, xy: np.ndarray) -> np.ndarray:
         """Height of the table top at world (x, y) points (N, 2)."""
@@ -353,6 +412,7 @@ class SupportSpec:
         return {
             "table_edge": None if self.table_edge is None else self.table_edge.to_params(),
             "curvature_per_m": round(self.curvature, 6),
+            "tray": None if self.tray is None else self.tray.to_params(),
         }
 
 
@@ -385,9 +445,10 @@ class SceneSpec:
         if self.support is None:
             return pos
         edge = self.support.table_edge
-        if edge is not None and len(pos):
-            reach = float((pos[:, :2] @ np.asarray(edge.normal)).max()) + _EDGE_MARGIN_M
-            edge.dist_m = max(edge.dist_m, reach)
+        if edge is not None:
+            xy = pos[:, :2] if self.support.tray is None else np.vstack([pos[:, :2], self.support.tray.corners()])
+            if len(xy):
+                edge.dist_m = max(edge.dist_m, float((xy @ np.asarray(edge.normal)).max()) + _EDGE_MARGIN_M)
         if self.support.curvature != 0.0 and len(pos):
             pos = pos.copy()
             pos[:, 2] += self.support.height(pos[:, :2])  # dropped on the flat plane: lift onto the curve
@@ -407,7 +468,19 @@ class SceneSpec:
 
     def background_meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """World-frame meshes that are background (label 0) but not the analytic support."""
-        return []
+        from sim.shapes import box_mesh
+
+        out = []
+        for half, centre, rot in self.static_boxes():
+            v, t = box_mesh(half)
+            out.append(((v.astype(np.float64) @ rot.T + centre).astype(np.float32), t))
+        return out
+
+    def static_boxes(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Fixed background boxes (half sides, centre, rotation) that objects collide with."""
+        if self.support is None or self.support.tray is None:
+            return []
+        return self.support.tray.walls()
 
     def to_params(self) -> dict[str, Any]:
         """JSON-ready description (release poses; physics adds the resting poses)."""
@@ -487,21 +560,30 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
         "tilt_x": _u(rng, cfg.camera_tilt_rad),
         "tilt_y": _u(rng, cfg.camera_tilt_rad),
     }
-    return SceneSpec(**camera, objects=objects, support=_sample_support(rng, cfg))
+    return SceneSpec(**camera, objects=objects, support=_sample_support(rng, cfg, objects))
 
 
 def _support_enabled(cfg: SceneConfig) -> bool:
-    return cfg.table_edge_prob > 0 or any(float(k) != 0.0 for k in cfg.support_curvature)
+    return cfg.table_edge_prob > 0 or cfg.tray_prob > 0 or any(float(k) != 0.0 for k in cfg.support_curvature)
 
 
-def _sample_support(rng: np.random.Generator, cfg: SceneConfig) -> SupportSpec | None:
-    """Per-frame support draws, after every Table I draw (the default stream is untouched)."""
+def _sample_support(rng: np.random.Generator, cfg: SceneConfig, objects: list[ObjectSpec]) -> SupportSpec | None:
+    """Per-frame support draws, after every Table I draw (the default stream is untouched).
+
+    A tray moves the objects' release points inside it and rules out curvature (its walls
+    stand on a flat bottom).
+    """
     if not _support_enabled(cfg):
         return None
     sup = SupportSpec()
     if cfg.table_edge_prob > 0 and rng.random() < cfg.table_edge_prob:
         dist = _u(rng, cfg.table_edge_dist_m)
         sup.table_edge = TableEdge(float(rng.uniform(-_PI, _PI)), dist, _u(rng, cfg.floor_drop_m), dist)
-    if any(float(k) != 0.0 for k in cfg.support_curvature):
+    if cfg.tray_prob > 0 and rng.random() < cfg.tray_prob:
+        inner = (_u(rng, cfg.tray_inner_m), _u(rng, cfg.tray_inner_m))
+        sup.tray = Tray(inner, _u(rng, cfg.tray_wall_height_m), _u(rng, cfg.tray_wall_thickness_m), float(rng.uniform(-_PI, _PI)))
+        for obj in objects:
+            sup.tray.keep_inside(obj)
+    if sup.tray is None and any(float(k) != 0.0 for k in cfg.support_curvature):
         sup.curvature = _u(rng, cfg.support_curvature)
     return sup

@@ -42,6 +42,7 @@ __all__ = [
     "random_procedural",
     "make_thin_shape",
     "random_thin",
+    "box_mesh",
     "fit_mesh",
     "MeshLibrary",
 ]
@@ -201,6 +202,11 @@ def _box_mesh(half: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
          [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
     )
     return corners.astype(np.float32), tris.astype(np.int32)
+
+
+def box_mesh(half: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Closed box mesh with half sides ``half``, centred on the origin (tray walls use it)."""
+    return _box_mesh(half)
 
 
 def _spow(x: np.ndarray, e: float) -> np.ndarray:

@@ -48,6 +48,8 @@ def test_family_keys_are_off_by_default_and_keep_the_digest():
         ("support_curvature", [-3.0, 0.5], "scene.support_curvature: min -3.0 is below"),
         ("table_edge_prob", -0.1, "scene.table_edge_prob"),
         ("floor_drop_m", [0.5, 0.2], "above max"),
+        ("tray_prob", 2, "scene.tray_prob"),
+        ("tray_wall_height_m", [0.0, 0.05], "scene.tray_wall_height_m: min 0.0 is below"),
     ],
 )
 def test_bad_family_values_are_one_line_config_errors(key, value, match):
@@ -133,3 +135,23 @@ def test_curved_support_changes_the_floor_depth(k):
     for o, o0 in zip(f.scene["params"]["objects"], flat.scene["params"]["objects"], strict=True):
         x, y, z = o0["rest_pos_m"]
         assert o["rest_pos_m"][2] == pytest.approx(z + k * (x * x + y * y), abs=2e-6)  # lifted onto the curve
+
+
+def test_tray_walls_are_raised_background_and_hold_the_objects():
+    cfg = SimConfig.from_dict({"scene": {
+        "n_objects": [3, 3], "tray_prob": 1.0, "tray_inner_m": [0.16, 0.16],
+        "tray_wall_height_m": [0.05, 0.05], "tray_wall_thickness_m": [0.01, 0.01], "camera_height_m": [0.4, 0.4]}})
+    for i in range(2):
+        f = generate_frame(i, 2, cfg)
+        tray = f.scene["params"]["support"]["tray"]
+        assert tray["wall_height_m"] == 0.05 and f.scene["params"]["support"]["curvature_per_m"] == 0.0
+        z = _world_z(f, cfg)
+        bg = (f.label == 0) & (f.clean > 0)
+        wall_top = bg & (np.abs(z - 0.05) < 1e-3)
+        assert wall_top.sum() > 300  # the wall rims are in view, 5 cm up, labelled background
+        assert z[bg].max() < 0.05 + 1e-3 and z[bg].min() > -1e-3
+        c, s = np.cos(tray["yaw_rad"]), np.sin(tray["yaw_rad"])
+        rot = np.array([[c, -s], [s, c]])  # tray frame -> world
+        for o in f.scene["params"]["objects"]:
+            local = np.abs(np.asarray(o["rest_pos_m"][:2]) @ rot)
+            assert local.max() < 0.08 + 0.01, o["rest_pos_m"]  # resting inside the tray
