@@ -1,0 +1,123 @@
+"""Height cue and robust standardisation (edge.cues): geometry, robustness, determinism."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from edge.cues import HEIGHT_CLIP, fit_dominant_plane, height_cue, robust_mean_std
+from edge.meta import ModelMeta
+from edge.preprocess import ROBUST_CLIP, preprocess, preprocess_for, standardize, valid_mask
+
+H, W = 171, 224
+FX, FY, CX, CY = 202.0, 204.8, 115.8, 88.0
+
+
+def _tilted_floor(dist: float = 0.3, tilt: tuple[float, float] = (0.12, -0.08)) -> np.ndarray:
+    """Z of the plane n . X = d seen by a pinhole camera (n tilted away from the optical axis)."""
+    v, u = np.mgrid[0:H, 0:W].astype(np.float64)
+    xn, yn = (u - CX) / FX, (v - CY) / FY
+    n = np.array([np.sin(tilt[0]), np.sin(tilt[1]), 1.0])
+    n /= np.linalg.norm(n)
+    return (dist / (n[0] * xn + n[1] * yn + n[2])).astype(np.float32)
+
+
+def _scene(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    z = _tilted_floor()
+    label = np.zeros((H, W), np.uint8)
+    for _ in range(6):
+        r0, c0 = rng.integers(10, H - 40), rng.integers(10, W - 40)
+        hh, ww = rng.integers(10, 30, size=2)
+        z[r0 : r0 + hh, c0 : c0 + ww] -= rng.uniform(0.02, 0.08)
+        label[r0 : r0 + hh, c0 : c0 + ww] = 1
+    z += rng.normal(0, 0.002, z.shape).astype(np.float32)
+    z[:12, :12] = 0  # a dead corner
+    z[rng.random(z.shape) < 0.002] = np.nan
+    return z, label
+
+
+def test_plane_fit_recovers_a_tilted_floor_without_intrinsics() -> None:
+    z = _tilted_floor()
+    fit = fit_dominant_plane(z, valid_mask(z))
+    assert fit.ok and fit.inlier_share > 0.99
+    np.testing.assert_allclose(fit.depth(z.shape), z, rtol=1e-5)
+
+
+def test_height_cue_is_object_height_in_cm_and_zero_where_invalid() -> None:
+    z, label = _scene(np.random.default_rng(0))
+    valid = valid_mask(z)
+    h = height_cue(z, valid)
+    assert h.dtype == np.float32 and h.shape == z.shape
+    assert np.all(h[~valid] == 0)
+    floor = valid & (label == 0)
+    assert np.abs(np.median(h[floor])) < 0.05 and np.percentile(np.abs(h[floor]), 95) < 0.8
+    assert np.median(h[valid & (label == 1)]) > 1.5
+    # height alone separates this easy scene almost perfectly: the cue carries the geometry
+    pred = (h > 0.8) & valid
+    gt = (label == 1) & valid
+    assert (pred & gt).sum() / (pred | gt).sum() > 0.95
+
+
+def test_box_top_bigger_than_the_visible_floor_does_not_become_the_plane() -> None:
+    """A support surface has nothing behind it: the floor wins over a large box top."""
+    z = _tilted_floor()
+    z[20:150, 30:200] -= 0.05  # box top covering ~58 % of the frame
+    h = height_cue(z, valid_mask(z))
+    assert np.median(h[20:150, 30:200]) == pytest.approx(5.0, abs=0.6)
+    assert np.abs(np.median(h[:15, :])) < 0.1
+
+
+def test_height_cue_is_deterministic_and_clipped() -> None:
+    z, _ = _scene(np.random.default_rng(1))
+    z[50, 50] = 4.0  # far below the table: clipped, not propagated
+    a, b = height_cue(z, valid_mask(z)), height_cue(z.copy(), valid_mask(z))
+    assert np.array_equal(a, b)
+    assert a.min() >= HEIGHT_CLIP[0] and a.max() <= HEIGHT_CLIP[1]
+    assert a[50, 50] == HEIGHT_CLIP[0]
+
+
+def test_height_cue_falls_back_on_an_almost_empty_frame() -> None:
+    z = np.zeros((H, W), np.float32)
+    z[80:83, 100:103] = 0.3
+    h = height_cue(z, valid_mask(z))
+    assert np.all(np.isfinite(h)) and np.all(h[z == 0] == 0)
+    assert np.all(height_cue(np.zeros((H, W), np.float32), np.zeros((H, W), bool)) == 0)
+
+
+@pytest.mark.parametrize("outlier", ["one pixel at 4 m", "40 pixels at 65.535 m"])
+def test_robust_standardisation_ignores_a_few_far_or_saturated_pixels(outlier: str) -> None:
+    z, _ = _scene(np.random.default_rng(2))
+    bad = z.copy()
+    if outlier.startswith("one"):
+        bad[100, 120] = 4.0
+    else:
+        idx = np.random.default_rng(3).choice(H * W, 40, replace=False)
+        bad.ravel()[idx] = 65.535
+    plain, _, _ = standardize(z, mode="valid-pixels")
+    plain_bad, _, _ = standardize(bad, mode="valid-pixels")
+    rob, m0, s0 = standardize(z, mode="robust")
+    rob_bad, m1, s1 = standardize(bad, mode="robust")
+    keep = valid_mask(z) & (bad == z)
+    # the plain statistics move the whole frame; the robust ones do not
+    assert np.median(np.abs(plain_bad[keep] - plain[keep])) > 0.1
+    assert np.max(np.abs(rob_bad[keep] - rob[keep])) < 0.05
+    assert abs(m1 - m0) < 1e-3 and abs(s1 / s0 - 1) < 0.05
+    assert np.abs(rob_bad).max() <= ROBUST_CLIP
+
+
+def test_robust_mean_std_of_a_constant_frame_uses_the_floor() -> None:
+    z = np.full((H, W), 0.3, np.float32)
+    mean, std = robust_mean_std(z, valid_mask(z), 1e-6)
+    assert mean == pytest.approx(0.3) and std == 1e-6
+
+
+def test_preprocess_adds_cue_channels_after_the_depth_copies() -> None:
+    z, _ = _scene(np.random.default_rng(4))
+    meta = ModelMeta(in_channels=3, standardize="robust", cues=("height",))
+    p = preprocess_for(z, meta)
+    assert p.x.shape == (4, 192, 224) and meta.net_channels == 4
+    assert np.array_equal(p.x[0], p.x[2])
+    np.testing.assert_array_equal(p.x[3, :H, :W], height_cue(z, valid_mask(z)))
+    assert not p.x[:, H:, :].any()
+    with pytest.raises(Exception, match="unknown input cue"):
+        preprocess(z, 1, cues=("normals",))
