@@ -30,6 +30,8 @@ from sim.shapes import MeshLibrary
 __all__ = ["SimConfig", "SimFrame", "generate_frame", "FRAME_PERIOD_NS"]
 
 FRAME_PERIOD_NS = 22_222_222  # 45 fps: Royale MODE_5_45FPS_500, the wrist-camera use case
+# fx, fy, cx, cy fitted to the points of the shared real capture (depthseg-sim import ply)
+REAL_PICO_FLEXX_K = (202.0, 204.8, 115.8, 88.0)
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,20 @@ class SimConfig:
     camera: Camera = field(default_factory=lambda: Camera.from_spec(SensorSpec()))
     supersample_edges: bool = True
     render_threads: int = 1  # one per worker process: the workers are the parallelism
+    # Per-frame intrinsics: 0 = always ``camera``; N > 0 = one of N cameras spaced evenly from
+    # ``camera`` to ``intrinsics_to`` (default: the real pico flexx calibration fitted on the shared
+    # capture). A fixed set keeps the ray grids cached per worker.
+    intrinsics_steps: int = 0
+    intrinsics_to: tuple[float, float, float, float] = REAL_PICO_FLEXX_K
+
+    def camera_for(self, rng: np.random.Generator | None) -> Camera:
+        """The camera of one frame (drawn from ``rng`` only when ``intrinsics_steps`` > 0)."""
+        if self.intrinsics_steps <= 0 or rng is None:
+            return self.camera
+        t = int(rng.integers(0, self.intrinsics_steps)) / max(self.intrinsics_steps - 1, 1)
+        a = np.array(self.camera.intrinsics)
+        fx, fy, cx, cy = (a + t * (np.array(self.intrinsics_to) - a)).round(4).tolist()
+        return replace(self.camera, fx=fx, fy=fy, cx=cx, cy=cy)
 
     def to_dict(self) -> dict[str, Any]:
         cam = self.camera
@@ -60,13 +76,19 @@ class SimConfig:
             },
             "supersample_edges": self.supersample_edges,
             "render_threads": self.render_threads,
+            **(
+                {"intrinsics_steps": self.intrinsics_steps, "intrinsics_to": list(self.intrinsics_to)}
+                if self.intrinsics_steps
+                else {}
+            ),
         }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> SimConfig:
         """Build from JSON (e.g. ``--config``); missing sections keep their defaults."""
         d = dict(d or {})
-        known = {"scene", "physics", "sensor", "camera", "supersample_edges", "render_threads"}
+        known = {"scene", "physics", "sensor", "camera", "supersample_edges", "render_threads", "intrinsics_steps",
+                 "intrinsics_to"}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError(f"unknown config sections {unknown}; valid: {sorted(known)}")
@@ -90,7 +112,19 @@ class SimConfig:
             )
         except (TypeError, ValueError) as exc:
             raise ConfigError(f"bad camera config: {exc}") from None
+        steps = d.get("intrinsics_steps", 0)
+        if isinstance(steps, bool) or not isinstance(steps, int) or not 0 <= steps <= 64:
+            raise ConfigError(f"intrinsics_steps must be a whole number in [0, 64], got {steps!r}")
+        k_to = d.get("intrinsics_to", REAL_PICO_FLEXX_K)
+        try:
+            k_to = tuple(float(v) for v in k_to)
+        except (TypeError, ValueError):
+            k_to = ()
+        if len(k_to) != 4 or not all(np.isfinite(k_to)) or min(k_to) <= 0:
+            raise ConfigError(f"intrinsics_to must be four positive numbers fx, fy, cx, cy; got {d.get('intrinsics_to')!r}")
         return cls(
+            intrinsics_steps=steps,
+            intrinsics_to=k_to,
             scene=SceneConfig.from_dict(d.get("scene")),
             physics=PhysicsConfig.from_dict(d.get("physics")),
             sensor=SensorConfig.from_dict(d.get("sensor")),
@@ -145,7 +179,7 @@ def generate_frame(
     """Frame ``index`` of the run with ``seed``: identical whenever and wherever it is made."""
     config = config or SimConfig()
     ss = np.random.SeedSequence([int(seed), int(index)])
-    scene_ss, sensor_ss = ss.spawn(2)
+    scene_ss, sensor_ss, camera_ss = ss.spawn(3)  # the first two as before: same frames
     scene_rng = np.random.default_rng(scene_ss)
     sensor_rng = np.random.default_rng(sensor_ss)
 
@@ -154,7 +188,7 @@ def generate_frame(
     for k, obj in enumerate(scene.objects):
         rot = quat_to_matrix(quat[k])
         meshes.append(((obj.shape.vertices.astype(np.float64) @ rot.T + pos[k]).astype(np.float32), obj.shape.triangles))
-    cam = config.camera
+    cam = config.camera_for(np.random.default_rng(camera_ss) if config.intrinsics_steps else None)
     rr = render(
         meshes,
         cam,
