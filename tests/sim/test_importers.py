@@ -238,3 +238,24 @@ def test_royale_ply_import(tmp_path):
     (f,) = list(iter_frames(out))
     assert f.label is None and np.array_equal(f.depth, cap.depth)
     assert f.info["fx"] == pytest.approx(fx)
+
+
+def test_ply_import_with_geometric_labels(tmp_path):
+    """--label-above-plane: a box 3 cm above a 40 x 30 px floor is labelled, the floor is not."""
+    w, h, k = 40, 30, (40.0, 42.0, 19.5, 14.5)
+    fx, fy, cx, cy = k
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    z = np.full((h, w), 0.3)
+    box = (slice(10, 20), slice(12, 26))
+    z[box] -= 0.03
+    xyz = np.stack([(u - cx) / fx * z, (v - cy) / fy * z, z], axis=-1)
+    ply = tmp_path / "cap.ply"
+    _write_ply(ply, xyz.reshape(-1, 3), np.zeros(w * h, np.uint8))
+    out = tmp_path / "cap.mcap"
+    s = imp.import_ply([ply], out, width=w, height=h, label_above_plane_m=0.01)
+    assert s.labelled and s.object_fraction == pytest.approx(140 / 1200, abs=0.01)
+    f = next(iter(iter_frames(out)))
+    expected = np.zeros((h, w), np.uint8)
+    expected[box] = 1
+    assert (f.label != expected).sum() <= 4  # the 3x3 median may round the box's corners
+    assert "10 mm above the RANSAC floor plane" in f.scene["params"]["labels"]
