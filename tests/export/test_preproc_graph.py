@@ -9,6 +9,7 @@ from exportgen import blensor_frames, dead_pixel_frames, tiny_model
 
 from edge.errors import DataError
 from edge.infer import Segmenter, sigmoid
+from edge.meta import ModelMeta
 from edge.preprocess import valid_mask
 from export.onnx_export import torch_logits
 from export.preproc_graph import PROB_ATOL, check_against_python, export_with_preprocessing
@@ -70,3 +71,178 @@ def test_three_channel_graph_equals_the_python_path(tmp_path):
     assert Segmenter(path, threads=1).meta.in_channels == 3
     check = check_against_python(path, model, meta, dead_pixel_frames(4)[2:5])
     assert check.ok and check.max_abs_prob_diff <= PROB_ATOL
+
+
+# -- robust standardisation and the height cue (issue 9 models) -------------------------------
+
+ROBUST_HEIGHT = {"standardize": "robust", "cues": ("height",)}
+
+
+def _cue_model(seed: int = 3, **kw):
+    """A tiny 3-channel vgg11_bn with ``kw`` (standardize, cues), batch-norm statistics from frames
+    through its own preprocessing (as `exportgen.tiny_model`), then converted to one channel."""
+    import torch
+    from torch import nn
+
+    from edge.model import build_model, count_parameters
+    from edge.preprocess import preprocess_batch_for
+    from edge.sampleframes import synthetic_frames
+    from export.single_channel import to_single_channel
+
+    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=3, training={"purpose": "tests"}, **kw)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        model = build_model(meta)
+    for m in model.modules():
+        if isinstance(m, nn.BatchNorm2d):
+            m.reset_running_stats()
+            m.momentum = None
+    x, _ = preprocess_batch_for(synthetic_frames(4, seed + 100).depth, meta)
+    model.train()
+    with torch.no_grad():
+        model(torch.from_numpy(x))
+    model.eval()
+    return to_single_channel(model, meta.with_(params=count_parameters(model)))
+
+
+def _hard_frames() -> list[np.ndarray]:
+    """Frames for every branch: few or no grid points (full-frame statistics, median plane),
+    collinear grid points (no usable hypothesis), far and saturated pixels, heavy noise."""
+    from edge.sampleframes import synthetic_frames
+
+    rng = np.random.default_rng(11)
+    base = synthetic_frames(1, 9).depth[0]
+    out = []
+    f = np.zeros_like(base)
+    f[1::12] = base[1::12]  # no grid point valid, many pixels: full-frame statistics and median
+    out.append(f)
+    f = np.zeros_like(base)
+    f[0, :] = base[0, :]  # one grid row: every triplet is collinear
+    out.append(f)
+    f = np.zeros_like(base)
+    f[80:87, 100:107] = base[80:87, 100:107]  # four grid points
+    out.append(f)
+    f = np.zeros_like(base)
+    f[1::2, 1::2] = base[1::2, 1::2]  # even number of valid pixels, none on the grid
+    out.append(f)
+    f = base.copy()
+    f[rng.random(f.shape) < 0.02] = 65.535  # saturated 16-bit pixels
+    out.append(f)
+    f = base + rng.normal(0, 0.01, base.shape).astype(np.float32)
+    out.append(f)
+    f = base.copy()
+    f[rng.random(f.shape) < 0.95] = 0.0  # 5 % valid
+    out.append(f)
+    return out
+
+
+@pytest.fixture(scope="module")
+def cue_frames():
+    from edge.sampleframes import synthetic_frames
+
+    return synthetic_frames(6, 21).depth + dead_pixel_frames(5) + _hard_frames() + blensor_frames(2)
+
+
+@pytest.mark.parametrize("standardize", ["valid-pixels", "robust"])
+@pytest.mark.parametrize("cues", [(), ("height",)])
+@pytest.mark.parametrize("channels", [1, 3])
+def test_preprocessing_module_equals_edge_preprocess(standardize, cues, channels, cue_frames):
+    """The torch module itself (no export): bit-identical to numpy on every branch, in a batch."""
+    import torch
+
+    from edge.preprocess import preprocess_for
+    from export.preproc_graph import PreprocGraph
+
+    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=channels,
+                     standardize=standardize, cues=cues)
+    with torch.no_grad():
+        x, valid = PreprocGraph(meta)(torch.from_numpy(np.stack(cue_frames)))
+    for i, f in enumerate(cue_frames):
+        ref = preprocess_for(f, meta)
+        np.testing.assert_array_equal(valid[i].numpy(), ref.valid)
+        assert x.shape[1:] == ref.x.shape
+        np.testing.assert_array_equal(x[i].numpy(), ref.x, err_msg=f"frame {i}")
+
+
+def test_robust_height_graph_matches_numpy_in_onnxruntime(tmp_path, cue_frames):
+    """The exported preprocessing in onnxruntime: depth channel and height cue vs edge.preprocess."""
+    import onnxruntime as ort
+
+    from edge.cues import fit_dominant_plane
+    from edge.preprocess import preprocess_for
+    from export.preproc_graph import HEIGHT_ATOL_CM, export_preprocessing
+
+    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, **ROBUST_HEIGHT)
+    path = export_preprocessing(meta, tmp_path / "pre.onnx")
+    ops = {n.op_type for n in onnx.load(str(path)).graph.node}
+    assert {"TopK", "ArgMax", "If"} <= ops and "Loop" not in ops
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = 1
+    sess = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    x, valid = sess.run(None, {"depth": np.stack(cue_frames)})
+    kinds = set()
+    for i, f in enumerate(cue_frames):
+        ref = preprocess_for(f, meta)
+        np.testing.assert_array_equal(valid[i], ref.valid)
+        np.testing.assert_allclose(x[i, 0], ref.x[0], rtol=0, atol=1e-6, err_msg=f"depth channel, frame {i}")
+        np.testing.assert_allclose(x[i, 1], ref.x[1], rtol=0, atol=HEIGHT_ATOL_CM, err_msg=f"height cue, frame {i}")
+        fit = fit_dominant_plane(f, ref.valid)
+        kinds.add("plane" if fit.ok else "fallback")
+    assert kinds == {"plane", "fallback"}  # both the RANSAC and the If branch were exercised
+    one, _ = sess.run(None, {"depth": cue_frames[0][None]})  # batch of one: the same numbers
+    np.testing.assert_array_equal(one[0], x[0])
+
+
+@pytest.fixture(scope="module")
+def robust_height(tmp_path_factory):
+    import torch
+
+    from export.onnx_export import export_onnx
+
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)  # as conftest.one_torch_thread (module fixtures run before the autouse one)
+    try:
+        model, meta = _cue_model(**ROBUST_HEIGHT)
+        d = tmp_path_factory.mktemp("cues")
+        return model, meta, export_with_preprocessing(model, meta, d / "pre.onnx"), export_onnx(model, meta, d / "plain.onnx")
+    finally:
+        torch.set_num_threads(n)
+
+
+def test_robust_height_model_with_preprocessing_equals_the_python_path(robust_height, cue_frames):
+    model, meta, path, plain = robust_height
+    assert meta.in_channels == 1 and meta.net_channels == 2
+    seg, ref = Segmenter(path, threads=1), Segmenter(plain, threads=1)
+    assert seg.with_preprocessing and seg.meta.cues == ("height",) and seg.meta.standardize == "robust"
+    agree, n_valid, both = 0, 0, []
+    for f in cue_frames:
+        a, b = seg.predict(f), ref.predict(f)
+        np.testing.assert_array_equal(a.valid, b.valid)
+        agree += int(np.count_nonzero((a.mask == b.mask) & b.valid))
+        n_valid += int(b.valid.sum())
+        both.append(b.mask[b.valid].mean() if b.valid.any() else 0.5)
+        np.testing.assert_allclose(a.prob, sigmoid(torch_logits(model, meta, f)), atol=PROB_ATOL)
+    assert agree / n_valid >= 0.999
+    assert 0 < np.mean(both) < 1  # both classes present: the comparison is not vacuous
+    check = check_against_python(path, model, meta, cue_frames[:4], threads=1)
+    assert check.ok and check.valid_mismatch == 0
+
+
+def test_unsupported_preprocessing_is_one_line_model_error(monkeypatch, tmp_path):
+    import export.preproc_graph as pg
+    from edge.errors import ModelError
+
+    model, meta = tiny_model(1, in_channels=3)
+    robust = meta.with_(standardize="robust")
+    monkeypatch.setattr(pg, "SUPPORTED_STANDARDIZE", ("valid-pixels",))
+    with pytest.raises(ModelError, match="standardize='robust'") as err:
+        export_with_preprocessing(model, robust, tmp_path / "x.onnx")
+    assert "\n" not in str(err.value)
+    monkeypatch.setattr(pg, "SUPPORTED_CUES", ())
+    with pytest.raises(ModelError, match=r"cue\(s\) \['height'\]") as err:
+        export_with_preprocessing(model, meta.with_(cues=("height",)), tmp_path / "x.onnx")
+    assert "\n" not in str(err.value)
+    monkeypatch.undo()
+    with pytest.raises(ModelError, match="first conv takes 3 channels but its metadata says 2") as err:
+        pg.check_supported(meta.with_(in_channels=1, cues=("height",)), model)
+    assert not (tmp_path / "x.onnx").exists()
