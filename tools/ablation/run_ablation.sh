@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Ablation of the v3 default's choices (README "Ablation"): input cues x width x simulated edge model.
+# Each row: 6 epochs on the first 3,000 frames of a training set (same scenes: seed 1), then a
+# single-channel export. Data: data/train4 (tools/default_sim_config.json) and data/train_blur
+# (the same config with the old blurred-edge fit, tools/ablation/train_blurred_edges.json):
+#   .venv/bin/depthseg-sim --out data/train_blur --frames 3000 --seed 1 --workers 2 \
+#       --config tools/ablation/train_blurred_edges.json
+# Measured: ~8 min a row on this 2-core machine when nothing else runs.
+#   bash tools/ablation/run_ablation.sh [ROW ...]      # default: all rows
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+BIN=.venv/bin
+COMMON="--limit 3000 --encoder vgg11 --batch-norm --in-channels 3 --standardize robust --extra-skip --epochs 6 \
+ --batch-size 16 --lr 1e-3 --lr-schedule cosine --patience 6 --seed 0 --threads 2"
+row() {  # name data width cues
+  local name=$1 data=$2 width=$3 cues=$4
+  local extra=""; [ "$cues" != none ] && extra="--cues $cues"
+  [ -f "runs/ablation/$name/best.pt" ] || $BIN/depthseg-train --data "$data" --out "runs/ablation/$name" --width "$width" $extra $COMMON
+  $BIN/depthseg-export --model "runs/ablation/$name/best.pt" --single-channel --out "runs/ablation/$name/model.onnx" --data "$data"
+}
+ROWS=${*:-"zh_w125 z_w125 zh_w125_blur zh_w25"}
+for r in $ROWS; do
+  case $r in
+    zh_w125) row zh_w125 data/train4 0.125 height ;;
+    z_w125) row z_w125 data/train4 0.125 none ;;
+    zh_w125_blur) row zh_w125_blur data/train_blur 0.125 height ;;
+    zh_w25) row zh_w25 data/train4 0.25 height ;;
+    *) echo "unknown row $r" >&2; exit 2 ;;
+  esac
+done
