@@ -12,7 +12,7 @@ Why it is built like this:
 - The CPU model, its ISA flags, the onnxruntime version and the thread settings are recorded
   with the numbers: int8 and fp32 speed depend on them (AVX-512 VNNI makes int8 shine).
 
-Torch-free (numpy + onnxruntime + psutil); `time_torch` imports torch only when called.
+Torch-free (numpy + onnxruntime + psutil); PyTorch eager timing is `edge.train.timing.time_torch`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,6 @@ from __future__ import annotations
 import gc
 import os
 import platform
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -30,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from edge.errors import ConfigError, ModelError
+from edge.errors import ConfigError
 from edge.infer import Segmenter
 
 __all__ = [
@@ -39,8 +37,6 @@ __all__ = [
     "runtime_info",
     "stats",
     "bench_models",
-    "export_random_model",
-    "time_torch",
     "ISA_FLAGS",
 ]
 
@@ -232,89 +228,3 @@ def bench_models(
         res["ratio_to_first"] = res["whole_frame_p50_ms"] / base["whole_frame_p50_ms"]
         res["infer_ratio_to_first"] = res["p50_ms"] / base["p50_ms"]
     return results
-
-
-def export_random_model(
-    encoder: str, out: Path, width: float = 1.0, single_channel: bool = False, int8: bool = False, threads: int = 2
-) -> Path:
-    """Export an untrained architecture with ``depthseg-export --random-init`` in a subprocess.
-
-    A subprocess keeps torch out of the timing process (its threads and memory would skew the
-    numbers, and the edge path must not import it).
-    """
-    cmd = [sys.executable, "-m", "export.cli", "--random-init", "--encoder", encoder, "--width", repr(float(width)),
-           "--out", str(out), "--check-frames", "2", "--threads", str(threads), "--json"]
-    if single_channel:
-        cmd.append("--single-channel")
-    if int8:
-        cmd += ["--int8", "--force", "--calib-frames", "8", "--val-frames", "4"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-        raise ModelError(f"exporting {encoder} width {width:g} for comparison failed: {tail}")
-    return out
-
-
-def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: int, warmup: int) -> list[dict[str, Any]]:
-    """PyTorch eager for each model's architecture, interleaved round-robin like `bench_models`.
-
-    Same architecture, random weights (latency does not depend on them); no BatchNorm folding,
-    as eager PyTorch runs it. OpenMP workers wait passively (``OMP_WAIT_POLICY=PASSIVE`` unless
-    set) for the same reason onnxruntime does not spin: on a shared CPU spinning costs more than
-    it saves. Imports torch: only for ``depthseg-bench --torch``, never on the edge path.
-    """
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    import torch
-
-    from edge.model import build_model
-    from edge.preprocess import preprocess_for
-
-    def runner(seg: Segmenter):
-        m = seg.meta
-        model = build_model(m).eval()
-        thr_logit = float(np.log(seg.threshold / (1.0 - seg.threshold)))
-
-        def whole(d: np.ndarray) -> tuple[float, float]:
-            torch.set_num_threads(seg.threads)
-            t0 = time.perf_counter()
-            pre = preprocess_for(d, m)
-            t1 = time.perf_counter()
-            with torch.inference_mode():
-                out = model(torch.from_numpy(pre.x[None])).numpy()
-            t2 = time.perf_counter()
-            h, w = pre.shape
-            mask = (out[0, 0, :h, :w] >= thr_logit).astype(np.uint8)
-            mask[~pre.valid] = 255
-            t3 = time.perf_counter()
-            return (t2 - t1) * 1e3, (t3 - t0) * 1e3
-
-        return whole
-
-    runners = [runner(s) for s in segs]
-    for r in range(warmup):
-        for run in runners:
-            run(frames[r % len(frames)])
-    inf: list[list[float]] = [[] for _ in segs]
-    tot: list[list[float]] = [[] for _ in segs]
-    n = len(segs)
-    for r in range(runs):
-        for k in range(n):
-            j = (r + k) % n
-            a, b = runners[j](frames[r % len(frames)])
-            inf[j].append(a)
-            tot[j].append(b)
-    out = []
-    for seg, i_ms, w_ms in zip(segs, inf, tot):
-        si, sw = stats(i_ms), stats(w_ms)
-        out.append(
-            {
-                "torch": torch.__version__,
-                "torch_threads": seg.threads,
-                "torch_omp_wait_policy": os.environ.get("OMP_WAIT_POLICY", ""),
-                "torch_p50_ms": si["p50"],
-                "torch_p90_ms": si["p90"],
-                "torch_whole_frame_p50_ms": sw["p50"],
-                "torch_fps": 1000.0 / sw["mean"],
-            }
-        )
-    return out

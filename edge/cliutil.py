@@ -2,18 +2,25 @@
 
 Every console script wraps its body in `run`, so a `DepthsegError` (or a missing file, or an
 unwritable output) becomes one line on stderr and exit code 2, never a traceback.
+
+Library code never names a command-line flag: its messages name the parameter in backticks
+(``"`labels_topic`"``), which is what a Python caller passes. `run` given the CLI's parser
+rewrites each backticked parameter that is one of the parser's destinations into its flag
+(``--labels-topic``), so a CLI user reads the flag to change.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
+import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from edge.errors import DepthsegError
 
-__all__ = ["run", "fail", "print_json", "progress"]
+__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message"]
 
 
 def fail(prog: str, message: str, code: int = 2) -> int:
@@ -21,13 +28,45 @@ def fail(prog: str, message: str, code: int = 2) -> int:
     return code
 
 
-def run(prog: str, body: Callable[[], int | None]) -> int:
-    """Call ``body``; map user-fixable errors to a one-line message and a non-zero code."""
+def flag_names(parser: argparse.ArgumentParser | None, aliases: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Parameter name -> the parser's flag for it (its first long option), plus ``aliases``."""
+    out: dict[str, str] = {}
+    todo = [parser] if parser is not None else []
+    while todo:
+        for action in todo.pop()._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                todo.extend(action.choices.values())
+            longs = [o for o in action.option_strings if o.startswith("--")]
+            if longs:
+                out.setdefault(action.dest, longs[0])
+    out.update(aliases or {})
+    return out
+
+
+def cli_message(message: str, flags: Mapping[str, str]) -> str:
+    """``message`` with every backticked parameter of ``flags`` replaced by its flag."""
+    return re.sub(r"`([A-Za-z_][A-Za-z0-9_]*)`", lambda m: flags.get(m.group(1), m.group(0)), message)
+
+
+def run(
+    prog: str,
+    body: Callable[[], int | None],
+    parser: argparse.ArgumentParser | None = None,
+    aliases: Mapping[str, str] | None = None,
+) -> int:
+    """Call ``body``; map user-fixable errors to a one-line message and a non-zero code.
+
+    Args:
+        prog: the command name that starts the message.
+        body: the command's work; returns the exit code (None = 0).
+        parser: the command's parser: backticked parameter names in messages become its flags.
+        aliases: extra parameter -> flag names (a library parameter named differently from the flag).
+    """
     try:
         rc = body()
         return 0 if rc is None else int(rc)
     except DepthsegError as exc:
-        return fail(prog, str(exc))
+        return fail(prog, cli_message(str(exc), flag_names(parser, aliases)))
     except FileNotFoundError as exc:
         return fail(prog, f"{exc.filename}: no such file or directory")
     except IsADirectoryError as exc:

@@ -1,21 +1,70 @@
-"""Where the shipped default model lives; every command uses it when ``--model`` is omitted."""
+"""Where the shipped default model lives, and the one rule that picks a model file.
+
+Every command uses the shipped model when ``--model`` is omitted: `resolve_model` decides which
+file that is (ONNX for the edge path, the checkpoint for torch tools, whichever exists for
+tools that take both) and gives the one error a user sees when it is missing.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["MODELS_DIR", "DEFAULT_CHECKPOINT", "DEFAULT_ONNX", "default_model"]
+from edge.errors import ModelError
+
+__all__ = ["MODELS_DIR", "DEFAULT_CHECKPOINT", "DEFAULT_ONNX", "SUFFIXES", "default_model", "resolve_model",
+           "default_models"]
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_CHECKPOINT = MODELS_DIR / "default.pt"  # torch checkpoint, 3-channel (paper input)
 DEFAULT_ONNX = MODELS_DIR / "default.onnx"  # single-channel fp32 export of the same weights
+SUFFIXES = {"onnx": (".onnx",), "pt": (".pt", ".pth")}
+_REBUILD = {
+    "onnx": "export it: depthseg-export --single-channel --out edge/models/default.onnx",
+    "pt": "rebuild it with tools/train_default.sh",
+}
+
+
+def _default(kind: str) -> Path:
+    # looked up at call time so tests can point the defaults elsewhere
+    return DEFAULT_ONNX if kind == "onnx" else DEFAULT_CHECKPOINT
+
+
+def default_models(kinds: Sequence[str] = ("onnx", "pt")) -> list[Path]:
+    """The shipped model files of ``kinds`` that exist, in the order of ``kinds``."""
+    return [_default(k) for k in kinds if _default(k).exists()]
+
+
+def resolve_model(path: str | Path | None, kinds: Sequence[str] = ("onnx", "pt")) -> Path:
+    """The model file to use: ``path`` checked, or the first shipped default of ``kinds`` that exists.
+
+    Args:
+        path: a model file, or None for the shipped default.
+        kinds: acceptable kinds, ``"onnx"`` and/or ``"pt"``, in order of preference.
+
+    Returns:
+        An existing file.
+
+    Raises:
+        ModelError: the file (or every default of ``kinds``) is missing, or ``path`` is a directory.
+    """
+    if path is None:
+        found = default_models(kinds)
+        if found:
+            return found[0]
+        missing = " or ".join(str(_default(k)) for k in kinds)
+        raise ModelError(
+            f"the shipped default model is missing ({missing}); name a model file, or {_REBUILD[kinds[0]]}"
+        )
+    p = Path(path)
+    if not p.exists():
+        raise ModelError(f"{p}: no such model file")
+    if p.is_dir():
+        want = " or ".join(s for k in kinds for s in SUFFIXES[k])
+        raise ModelError(f"{p}: is a directory, expected a {want} model file")
+    return p
 
 
 def default_model(kind: str = "onnx") -> Path:
     """Path of the shipped model of ``kind`` ('onnx' for the edge path, 'pt' for torch tools)."""
-    from edge.errors import ModelError
-
-    p = DEFAULT_ONNX if kind == "onnx" else DEFAULT_CHECKPOINT
-    if not p.exists():
-        raise ModelError(f"the shipped default model {p} is missing; rebuild it with tools/train_default.sh")
-    return p
+    return resolve_model(None, kinds=(kind,))

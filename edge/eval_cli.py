@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from collections.abc import Iterator
-from pathlib import Path
 
 from edge.cliutil import print_json, progress, run
-from edge.errors import DataError
 from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, evaluate, model_label
-from edge.frames import TOPIC_DEPTH, TOPIC_LABELS, Frame, list_mcap_files
+from edge.io import TOPIC_DEPTH, TOPIC_LABELS, open_frames
 from edge.metrics import ErrorBreakdown, MetricSummary
 
 PROG = "depthseg-eval"
@@ -75,52 +72,6 @@ def add_boundary_args(p: argparse.ArgumentParser) -> None:
 
 
 add_boundary_args(parser)
-
-
-def _message_counts(path: Path) -> dict[str, int] | None:
-    """Topic -> message count from the MCAP summary; None when the file has no usable summary."""
-    from mcap.reader import SeekingReader
-
-    try:
-        with open(path, "rb") as fh:
-            summary = SeekingReader(fh).get_summary()
-    except Exception:  # noqa: BLE001 - damaged footer: the reader reports damage while streaming
-        return None
-    if summary is None or summary.statistics is None:
-        return None
-    counts: dict[str, int] = {}
-    for cid, ch in summary.channels.items():
-        counts[ch.topic] = counts.get(ch.topic, 0) + int(summary.statistics.channel_message_counts.get(cid, 0))
-    return counts
-
-
-def open_frames(path: str, depth_topic: str | None, labels_topic: str | None) -> tuple[Iterator[Frame], int | None]:
-    """A stream of frames (with labels) from PATH and the number of depth frames when known.
-
-    Every file is opened (topics detected, labels checked) before the first frame is scored,
-    so a missing label topic fails at once instead of after minutes of inference.
-    """
-    from replay.reader import open_depth_stream
-
-    streams = []
-    total: int | None = 0
-    for f in list_mcap_files(path):
-        st = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic)
-        counts = _message_counts(f)
-        present = sorted(t for t in st.topics if counts is None or counts.get(t, 0) > 0)
-        if st.labels_topic is None or (counts is not None and counts.get(st.labels_topic, 0) == 0):
-            raise DataError(
-                f"{f}: no labels found for depth topic {st.depth_topic} (looked for a mono8 Image topic named "
-                f"'label(s)'); topics present: {', '.join(present) or 'none'}; name it with --labels-topic"
-            )
-        streams.append(st)
-        total = None if total is None or st.frame_count is None else total + st.frame_count
-
-    def chain() -> Iterator[Frame]:
-        for st in streams:
-            yield from st
-
-    return chain(), total
 
 
 def _score_rows(names: list[str], summaries: list[MetricSummary | None]) -> list[str]:
@@ -219,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {args.threads}")
         base = PlaneBaseline(height_threshold_m=args.baseline_height, median_px=args.baseline_median) if args.baseline else False
-        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic)
+        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, require_labels=True)
         predictor = load_predictor(args.model, threads=args.threads)
         if args.limit is not None and total is not None:
             total = min(total, args.limit)
@@ -236,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_table(report, model_label(predictor.meta)))
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":  # pragma: no cover

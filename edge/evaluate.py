@@ -1,7 +1,7 @@
 """Score a model (and optionally the RANSAC baseline) on labelled depth frames, streaming.
 
 Why streaming: a test set of thousands of frames must not be held in memory; `evaluate` pulls
-one frame at a time from any iterable of `edge.frames.Frame` and keeps only running sums
+one frame at a time from any iterable of `edge.io.Frame` and keeps only running sums
 (`edge.metrics.MetricAccumulator`, `edge.metrics.BreakdownAccumulator`) plus at most
 ``max_figures`` frames for the figures.
 Predictions are thresholded at the model's stored decision boundary unless told otherwise, the
@@ -30,7 +30,8 @@ import numpy as np
 
 from edge.baseline import PlaneBaseline, intrinsics_for
 from edge.errors import ConfigError, DataError, ModelError
-from edge.frames import Frame, write_bytes_atomic
+from edge.infer import Predictor
+from edge.io import Frame, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.metrics import (
     BreakdownAccumulator,
@@ -43,7 +44,6 @@ from edge.metrics import (
     frame_scores,
     threshold_logit,
 )
-from edge.predict import Predictor
 from edge.preprocess import standardize, valid_mask
 
 __all__ = ["EvalReport", "evaluate", "render_figure", "COLORS", "model_label"]
@@ -296,7 +296,7 @@ def evaluate(
     if seen == 0:
         raise DataError(
             f"no labelled frames to evaluate ({unlabelled} frames without labels); "
-            "point --data at MCAP files with a label topic, or name it with --labels-topic"
+            "point `data` at MCAP files with a label topic, or name it with `labels_topic`"
         )
     for _, neg_i, (depth, label, pred, bpred, title) in sorted(worst, reverse=True):  # worst first
         path = Path(fig_dir or ".") / f"worst_{-neg_i:06d}.png"

@@ -20,15 +20,19 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
+from edge.defaults import resolve_model
 from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
+from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
 from edge.preprocess import preprocess_batch_for, preprocess_for, valid_mask
 
 __all__ = [
     "Prediction",
+    "Predictor",
     "Segmenter",
     "session_options",
     "sigmoid",
@@ -39,12 +43,22 @@ __all__ = [
     "OUTPUT_VALID",
 ]
 
-UNKNOWN = 255  # mask value of invalid pixels: the sensor gave no range, so no class either
 INPUT_NAME = "depth"
 OUTPUT_LOGITS = "logits"
 OUTPUT_PROB = "probability"
 OUTPUT_VALID = "valid"
-_LOGIT_CLIP = 80.0  # exp(80) is finite in float32; beyond it the sigmoid is 0 or 1 anyway
+
+
+class Predictor(Protocol):
+    """What eval and tune need of a model: metadata, a name, and float32 H x W logits of a frame.
+
+    `Segmenter` (ONNX) and `edge.train.predict.TorchPredictor` (checkpoint) are the two kinds.
+    """
+
+    meta: ModelMeta
+    name: str
+
+    def logits(self, depth: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
@@ -55,16 +69,7 @@ class Prediction:
     mask: np.ndarray  # uint8 H x W
     valid: np.ndarray  # bool H x W
     timings: dict[str, float]  # ms: pre, infer, post, total
-
-
-def sigmoid(logits: np.ndarray) -> np.ndarray:
-    """Float32 sigmoid without overflow warnings (a new array; the input is not touched)."""
-    p = np.clip(logits, -_LOGIT_CLIP, _LOGIT_CLIP).astype(np.float32, copy=False)
-    np.negative(p, out=p)
-    np.exp(p, out=p)
-    p += 1.0
-    np.reciprocal(p, out=p)
-    return p
+    logits: np.ndarray | None = None  # float32 H x W; the mask is `edge.metrics.segmentation_mask` of these
 
 
 def session_options(threads: int = 2, spin: bool = False, optimized_model_path: str | None = None):
@@ -111,18 +116,7 @@ class Segmenter:
     ) -> None:
         import onnxruntime as ort
 
-        from edge.defaults import DEFAULT_ONNX
-
-        path = Path(model_path) if model_path is not None else DEFAULT_ONNX
-        if not path.exists():
-            hint = (
-                "export one with depthseg-export"
-                if model_path is not None
-                else "pass --model, or export it: depthseg-export --single-channel --out edge/models/default.onnx"
-            )
-            raise ModelError(f"{path}: no such model file; {hint}")
-        if path.is_dir():
-            raise ModelError(f"{path}: is a directory, expected an .onnx model file")
+        path = resolve_model(model_path, kinds=("onnx",))
         try:
             self.session = ort.InferenceSession(
                 str(path), sess_options=session_options(threads, spin), providers=list(providers)
@@ -132,6 +126,7 @@ class Segmenter:
                 f"{path}: not a readable ONNX model ({type(exc).__name__}: {_one_line(exc)}); re-export it with depthseg-export"
             ) from None
         self.path = path
+        self.name = str(path)
         self.threads = int(threads)
         self.props: dict[str, str] = dict(self.session.get_modelmeta().custom_metadata_map)
         try:
@@ -198,8 +193,7 @@ class Segmenter:
         h, w = d.shape
         if self.with_preprocessing:
             p = self._run_raw(np.ascontiguousarray(d, dtype=np.float32)[None])[0][0]
-            p = np.clip(p, 1e-7, 1.0 - 1e-7)
-            return (np.log(p) - np.log1p(-p)).astype(np.float32)
+            return logit(np.asarray(p, dtype=np.float32))
         pre = preprocess_for(d, self.meta)
         out = self.session.run([self._out_main], {self.input_name: pre.x[None]})[0]
         return np.ascontiguousarray(out[0, 0, :h, :w])
@@ -212,14 +206,21 @@ class Segmenter:
         h, w = ds[0].shape
         if self.with_preprocessing:
             x = np.stack([np.asarray(d, dtype=np.float32) for d in ds])
-            p = np.clip(self._run_raw(x)[0], 1e-7, 1.0 - 1e-7)
-            return (np.log(p) - np.log1p(-p)).astype(np.float32)
+            return logit(np.asarray(self._run_raw(x)[0], dtype=np.float32))
         x, _valid = preprocess_batch_for(ds, self.meta)
         out = self.session.run([self._out_main], {self.input_name: x})[0]
         return np.ascontiguousarray(out[:, 0, :h, :w])
 
-    def predict(self, depth: np.ndarray) -> Prediction:
-        """Raw depth (metres; 0/NaN/negative/inf invalid) in, probability and mask out."""
+    def predict(self, depth: np.ndarray, threshold: float | None = None) -> Prediction:
+        """Raw depth (metres; 0/NaN/negative/inf invalid) in, probability and mask out.
+
+        Args:
+            depth: one H x W frame, metres.
+            threshold: decision boundary for this call (default: the segmenter's).
+
+        Returns:
+            A `Prediction`; ``mask`` is 0 background, 1 object, `UNKNOWN` invalid.
+        """
         t0 = time.perf_counter()
         d = self._check_frame(depth)
         h, w = d.shape
@@ -229,6 +230,7 @@ class Segmenter:
             outs = self._run_raw(x)
             t2 = time.perf_counter()
             prob = outs[0][0]
+            logits = logit(np.asarray(prob, dtype=np.float32))
             if len(outs) > 1:
                 valid = outs[1][0].astype(bool, copy=False)
             else:
@@ -241,14 +243,9 @@ class Segmenter:
             t2 = time.perf_counter()
             logits = out[0, 0, :h, :w]
             prob = sigmoid(logits)
-        if self.with_preprocessing:
-            mask = (prob >= self.threshold).view(np.uint8)
-        else:
-            # Compare logits, as depthseg-eval and depthseg-tune do: float32 probabilities cannot
-            # separate thresholds near 1 (the paper's 0.9999), logits can.
-            thr = float(np.log(self.threshold) - np.log1p(-self.threshold))
-            mask = (logits >= thr).view(np.uint8)
-        mask[~valid] = UNKNOWN
+        # The one threshold rule (edge.metrics): logits against logit(threshold), as eval, tune
+        # and replay decide; float32 probabilities cannot separate thresholds near 1 (0.9999).
+        mask = segmentation_mask(logits, valid, self.threshold if threshold is None else float(threshold))
         t3 = time.perf_counter()
         timings = {
             "pre": (t1 - t0) * 1e3,
@@ -256,4 +253,4 @@ class Segmenter:
             "post": (t3 - t2) * 1e3,
             "total": (t3 - t0) * 1e3,
         }
-        return Prediction(prob=prob, mask=mask, valid=valid, timings=timings)
+        return Prediction(prob=prob, mask=mask, valid=valid, timings=timings, logits=logits)

@@ -20,9 +20,13 @@ i.e. an empty prediction has precision 1 only when there was nothing to find, an
 whenever there was nothing to find. A frame with no valid pixel at all has no score: it is
 counted in ``skipped`` and left out of the means (pixel accuracy would be 0 / 0 too).
 
-A pixel is predicted object when sigmoid(logit) >= threshold (the paper: values under the
-decision boundary are background, all others object); `predict_mask` compares logits with
-logit(threshold) so no sigmoid is evaluated per pixel.
+**The threshold rule** (the only one; `Segmenter`, replay, eval and tune all use it): a pixel is
+predicted object when sigmoid(logit) >= threshold (the paper: values under the decision boundary
+are background, all others object), evaluated as ``logit >= logit(threshold)``
+(`threshold_logit`, `predict_mask`, `segmentation_mask`). Comparing float32 probabilities
+instead gives other classes near extreme thresholds: at the paper's 0.9999 every logit above
+about 16 is a probability of exactly 1 in float32. `UNKNOWN` (255) is the mask value of a pixel
+without valid depth; `sigmoid` and `logit` are the one pair of conversions.
 
 Where the errors are (`boundary_band`, `BreakdownAccumulator`): most disagreement between a
 segmentation and its labels sits on the object outline, where a label is a matter of a pixel
@@ -47,6 +51,10 @@ import numpy as np
 from edge.errors import ConfigError, DataError
 
 __all__ = [
+    "UNKNOWN",
+    "sigmoid",
+    "logit",
+    "segmentation_mask",
     "Confusion",
     "FrameScores",
     "MetricSummary",
@@ -59,6 +67,41 @@ __all__ = [
     "ErrorBreakdown",
     "BreakdownAccumulator",
 ]
+
+
+UNKNOWN = 255  # mask value of invalid pixels: the sensor gave no range, so no class either
+_LOGIT_CLIP = 80.0  # exp(80) is finite in float32; beyond it the sigmoid is 0 or 1 anyway
+_PROB_EPS = 1e-7  # probabilities are clipped to [eps, 1 - eps] before their logit is taken
+
+
+def sigmoid(x: np.ndarray | float) -> np.ndarray | float:
+    """Logistic function without overflow warnings; float32 in -> float32 out, else float64.
+
+    Args:
+        x: logits (array or scalar); not modified.
+
+    Returns:
+        A new array of the same shape (a Python float for a scalar).
+    """
+    a = np.asarray(x)
+    if a.dtype != np.float32:
+        a = a.astype(np.float64)
+    p = np.clip(a, -_LOGIT_CLIP, _LOGIT_CLIP)
+    np.negative(p, out=p)
+    np.exp(p, out=p)
+    p += 1.0
+    np.reciprocal(p, out=p)
+    return p if p.ndim else float(p)
+
+
+def logit(p: np.ndarray | float) -> np.ndarray | float:
+    """Inverse of `sigmoid`, probabilities clipped to [1e-7, 1 - 1e-7]; float32 in -> float32 out."""
+    a = np.asarray(p)
+    if a.dtype != np.float32:
+        a = a.astype(np.float64)
+    a = np.clip(a, _PROB_EPS, 1.0 - _PROB_EPS)
+    out = (np.log(a) - np.log1p(-a)).astype(a.dtype, copy=False)
+    return out if out.ndim else float(out)
 
 
 @dataclass(frozen=True)
@@ -99,6 +142,13 @@ def threshold_logit(threshold: float) -> float:
 def predict_mask(logits: np.ndarray, threshold: float = 0.5) -> np.ndarray:
     """Boolean object mask: sigmoid(logits) >= threshold, evaluated as logits >= logit(threshold)."""
     return np.asarray(logits) >= threshold_logit(threshold)
+
+
+def segmentation_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5) -> np.ndarray:
+    """The uint8 mask a user sees: 1 object, 0 background (`predict_mask`), `UNKNOWN` where not ``valid``."""
+    mask = predict_mask(logits, threshold).view(np.uint8)
+    mask[~np.asarray(valid, dtype=bool)] = UNKNOWN
+    return mask
 
 
 def confusion(pred: np.ndarray, label: np.ndarray, valid: np.ndarray | None = None) -> Confusion:

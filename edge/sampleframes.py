@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from edge.errors import ConfigError, DataError
-from edge.frames import iter_frames
+from edge.io import iter_frames
 from edge.meta import SensorSpec
 
 __all__ = ["FrameSample", "synthetic_frame", "synthetic_frames", "load_frames", "sample_frames"]
@@ -88,7 +88,7 @@ def synthetic_frames(n: int, seed: int = 0, sensor: SensorSpec | None = None) ->
     return FrameSample(
         depth=[p[0] for p in pairs],
         label=[p[1] for p in pairs],
-        source=f"{n} synthetic frames (seed {seed}; pass --data DIR for simulated frames)",
+        source=f"{n} synthetic frames (seed {seed}; pass `data` DIR for simulated frames)",
     )
 
 

@@ -37,6 +37,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--val-dir", nargs="+", help="explicit validation MCAP files/directories")
     d.add_argument("--split", default="0.7,0.2,0.1", help="train,val,test fractions for --data (default: %(default)s, the paper's)")
     d.add_argument("--limit", type=int, help="use at most this many frames (quick experiments)")
+    d.add_argument("--depth-topic", default=None, help="depth Image topic (default: auto-detected, as depthseg-eval)")
+    d.add_argument("--labels-topic", default=None,
+                   help="label Image topic, mono8 nonzero = object (default: auto-detected); labels pair with depth "
+                        "frames by header stamp within 1 ms, as in depthseg-eval")
     m = p.add_argument_group("model")
     m.add_argument("--encoder", default="vgg16", help="vgg11, vgg13, vgg16 or vgg19 (default: %(default)s, the paper's)")
     m.add_argument("--width", type=float, default=1.0, help="channel width multiplier (1.0 = paper; 0.125 = the shipped default)")
@@ -67,12 +71,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
 
     def body() -> int:
-        from edge.data import load_frames, split_indices
         from edge.meta import ModelMeta
-        from edge.train import TrainConfig, train
+        from edge.train.data import load_frames, split_indices
+        from edge.train.loop import TrainConfig, train
 
         if bool(args.data) == bool(args.train_dir):
             raise ConfigError("give either --data (split automatically) or --train-dir with --val-dir")
@@ -89,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
         )
-        from edge.encoders import list_encoders
+        from edge.train.encoders import list_encoders
 
         if args.encoder not in list_encoders():
             raise ConfigError(f"unknown encoder '{args.encoder}'; valid encoders: {', '.join(list_encoders())}")
@@ -102,14 +107,15 @@ def main(argv: list[str] | None = None) -> int:
         meta = ModelMeta(encoder=args.encoder, width=args.width, in_channels=args.in_channels,
                          batch_norm=args.batch_norm, extra_skip=args.extra_skip, standardize=args.standardize,
                          cues=cues)
+        topics = {"depth_topic": args.depth_topic, "labels_topic": args.labels_topic}
         with progress(desc="loading frames", unit="frame") as bar:
             if args.data:
-                allf = load_frames(args.data, limit=args.limit, progress=bar)
+                allf = load_frames(args.data, limit=args.limit, progress=bar, **topics)
                 tr, va, _te = split_indices(len(allf), fr, args.seed)
                 train_set, val_set = allf.subset(tr), allf.subset(va)
             else:
-                train_set = load_frames(args.train_dir, limit=args.limit, progress=bar)
-                val_set = load_frames(args.val_dir, progress=bar)
+                train_set = load_frames(args.train_dir, limit=args.limit, progress=bar, **topics)
+                val_set = load_frames(args.val_dir, progress=bar, **topics)
         info = {
             "command": " ".join([PROG] + [shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])]),
             "data": [str(p) for p in (args.data or args.train_dir)],
@@ -126,15 +132,15 @@ def main(argv: list[str] | None = None) -> int:
 
         def on_epoch(row: dict) -> None:
             bar.reset()
-            bar.set_description(f"epoch {row['epoch'] + 1}")
-            print(f"epoch {row['epoch'] + 1:3d}  train {row['train_loss']:.4f}  val {row['val_loss']:.4f}  "
+            bar.set_description(f"epoch {row['epoch']}")
+            print(f"epoch {row['epoch']:3d}  train {row['train_loss']:.4f}  val {row['val_loss']:.4f}  "
                   f"val IoU {row['val_iou']:.4f}  lr {row['lr']:.2e}  {row['epoch_seconds']:.0f}s", file=sys.stderr, flush=True)
 
         res = train(meta, train_set, val_set, args.out, cfg, resume=args.resume, on_batch=on_batch,
                     on_epoch=on_epoch, training_info=info)
         bar.close()
         summary = {
-            "best_epoch": res.best_epoch + 1, "best_val_loss": res.best_val_loss, "epochs_run": res.epochs_run,
+            "best_epoch": res.best_epoch, "best_val_loss": res.best_val_loss, "epochs_run": res.epochs_run,
             "minutes": round(res.minutes, 2), "best": str(res.best_path), "train_frames": len(train_set),
             "val_frames": len(val_set),
             "val_iou": next((h["val_iou"] for h in res.history if h["epoch"] == res.best_epoch), None),
@@ -146,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{summary['val_iou']:.4f}) after {res.epochs_run} epochs, {res.minutes:.1f} min -> {res.best_path}")
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,6 @@ Torch-free: torch is imported only when the model itself is a ``.pt`` checkpoint
 from __future__ import annotations
 
 import math
-import os
 import re
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -49,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
-from edge.frames import Frame, atomic_path
+from edge.io import Frame, atomic_write
 from edge.metrics import threshold_logit
 from edge.preprocess import valid_mask
 
@@ -366,7 +365,7 @@ def heldout_assigner(split: float, seed: int) -> Callable[[int], bool]:
     first n frames, floor(n * split + u) are held out, spread evenly through the stream.
     """
     if not 0.0 <= split < 1.0:
-        raise ConfigError(f"--split must lie in [0, 1) (the held-out fraction), got {split}")
+        raise ConfigError(f"`split` must lie in [0, 1) (the held-out fraction), got {split}")
     u = float(np.random.default_rng(seed).random())
 
     def held(i: int) -> bool:
@@ -495,7 +494,7 @@ def tune(
     """
     obj = parse_objective(objective) if isinstance(objective, str) else objective
     if limit is not None and limit < 1:
-        raise ConfigError(f"--limit must be >= 1 frame, got {limit}")
+        raise ConfigError(f"`limit` must be >= 1 frame, got {limit}")
     held = heldout_assigner(split, seed)
     meta = getattr(predictor, "meta", None)
     stored = float(meta.threshold) if meta is not None else 0.5
@@ -533,13 +532,13 @@ def tune(
         )
     if tuning.frames == 0:
         raise DataError(
-            f"no tuning frames left: {used} labelled frames, {heldout.frames} held out by --split {split:g}; "
-            "lower --split or add frames"
+            f"no tuning frames left: {used} labelled frames, {heldout.frames} held out by `split` {split:g}; "
+            "lower `split` or add frames"
         )
     if split > 0 and heldout.frames == 0:
         raise DataError(
-            f"only {used} labelled frames: --split {split:g} held none out; add frames, raise --split, "
-            "or pass --split 0 for in-sample numbers"
+            f"only {used} labelled frames: `split` {split:g} held none out; add frames, raise `split`, "
+            "or pass `split` 0 for in-sample numbers"
         )
     tc = tuning.curves()
     choice = choose_threshold(tc, obj)
@@ -593,12 +592,8 @@ def plot_pr_curve(result: TuneResult, path: str | Path, title: str = "") -> Path
         ax.set_title(title or f"depthseg-tune {result.objective.text} ({kind})", fontsize=10)
         ax.legend(loc="best", fontsize=8)
         fig.tight_layout()
-        tmp = atomic_path(path)
-        try:
+        with atomic_write(path) as tmp:
             fig.savefig(tmp, format="png")
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
     finally:
         plt.close(fig)
     return path

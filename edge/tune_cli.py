@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from edge.cliutil import print_json, progress, run
-from edge.frames import TOPIC_DEPTH, TOPIC_LABELS, Frame
+from edge.io import TOPIC_DEPTH, TOPIC_LABELS, Frame
 from edge.tune import OBJECTIVE_FORMS
 
 PROG = "depthseg-tune"
@@ -57,31 +57,18 @@ parser.add_argument("--threads", type=int, default=2, metavar="N", help="inferen
 
 
 def open_frames(path: str, depth_topic: str | None, labels_topic: str | None, pseudo: bool) -> tuple[Iterator[Frame], int | None]:
-    """Frames of every recording in PATH (a .mcap file or a directory of them) and their count when known.
-
-    Labelled mode shares ``depthseg-eval``'s reader (a file without labels is refused before any
-    inference, naming the topics it has); pseudo-label mode reads depth only.
-    """
+    """Frames of every recording in PATH through `edge.io.open_frames` (labelled, or depth only for pseudo-labels)."""
     from edge.errors import DataError
-    from edge.eval_cli import open_frames as open_labelled
-    from edge.frames import list_mcap_files
-    from replay.reader import open_depth_stream
+    from edge.io import open_frames as open_recordings
 
-    if not pseudo:
-        try:
-            return open_labelled(path, depth_topic, labels_topic)
-        except DataError as exc:
-            if "no labels found" not in str(exc):
-                raise
-            raise DataError(f"{exc}, or tune against geometric pseudo-labels with --pseudo-labels") from None
-    streams = [open_depth_stream(f, topic=depth_topic, labels_topic="") for f in list_mcap_files(path)]
-    counts = [s.frame_count for s in streams]
-
-    def chain() -> Iterator[Frame]:
-        for s in streams:
-            yield from s
-
-    return chain(), None if any(c is None for c in counts) else sum(counts)
+    if pseudo:
+        return open_recordings(path, depth_topic, labels_topic="")
+    try:
+        return open_recordings(path, depth_topic, labels_topic, require_labels=True)
+    except DataError as exc:
+        if "no labels found" not in str(exc):
+            raise
+        raise DataError(f"{exc}, or tune against geometric pseudo-labels with `pseudo_labels`") from None
 
 
 def _model_paths(model: str | None) -> tuple[Path, list[Path]]:
@@ -91,14 +78,13 @@ def _model_paths(model: str | None) -> tuple[Path, list[Path]]:
     bench run), and the threshold is stored in both of its files (checkpoint and ONNX export of
     the same weights), so every tool agrees.
     """
-    from edge import defaults
-    from edge.predict import resolve_model_path
+    from edge.defaults import default_models, resolve_model
 
     if model is not None:
-        return resolve_model_path(model), []
-    present = [Path(p) for p in (defaults.DEFAULT_ONNX, defaults.DEFAULT_CHECKPOINT) if Path(p).exists()]
+        return resolve_model(model), []
+    present = default_models(("onnx", "pt"))
     if not present:
-        return resolve_model_path(None), []  # raises the one-line "default model missing" error
+        return resolve_model(None), []  # raises the one-line "default model missing" error
     return present[0], present[1:]
 
 
@@ -161,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     def body() -> int:
         from edge.errors import ConfigError
         from edge.predict import load_predictor
-        from edge.threshold_store import store_threshold
+        from edge.train.threshold_store import store_threshold
         from edge.tune import heldout_assigner, parse_objective, plot_pr_curve, pseudo_labeller, tune
 
         # Check every option before the (slow) pass over the frames.
@@ -220,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_report(d))
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -17,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
-import os
 import warnings
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
@@ -27,11 +26,12 @@ import numpy as np
 import torch
 
 from edge.errors import ModelError
-from edge.frames import atomic_path
 from edge.infer import INPUT_NAME, OUTPUT_LOGITS
+from edge.io import atomic_path, atomic_write
 from edge.meta import ModelMeta
-from edge.model import FCN8s
+from edge.metrics import threshold_logit
 from edge.preprocess import padded_shape, preprocess, preprocess_for
+from edge.train.model import FCN8s
 
 __all__ = [
     "OPSET",
@@ -87,12 +87,8 @@ def write_onnx(model_proto, out: str | Path) -> Path:
         onnx.checker.check_model(model_proto, full_check=True)
     except Exception as exc:  # noqa: BLE001 - checker raises several types
         raise ModelError(f"exported graph fails onnx.checker: {str(exc).splitlines()[0][:200]}") from None
-    tmp = atomic_path(out)
-    try:
+    with atomic_write(out) as tmp:
         onnx.save_model(model_proto, str(tmp), save_as_external_data=False)
-        os.replace(tmp, out)
-    finally:
-        tmp.unlink(missing_ok=True)
     return out
 
 
@@ -203,7 +199,7 @@ def check_against_torch(
     from edge.infer import Segmenter
 
     seg = Segmenter(onnx_path, threads=threads)
-    thr_logit = float(np.log(seg.threshold / (1.0 - seg.threshold)))
+    thr_logit = threshold_logit(seg.threshold)
     diffs, scale, flips, n_valid = [], 0.0, 0, 0
     refs = []
     for d in frames:

@@ -57,11 +57,11 @@ from edge.cues import (
     hypothesis_table,
 )
 from edge.errors import ModelError
-from edge.frames import atomic_path
 from edge.infer import INPUT_NAME, OUTPUT_PROB, OUTPUT_VALID, sigmoid
+from edge.io import atomic_path
 from edge.meta import ModelMeta
-from edge.model import FCN8s
 from edge.preprocess import ROBUST_CLIP, STD_FLOOR, padded_shape
+from edge.train.model import FCN8s
 from export.onnx_export import OPSET, export_props, quiet_export, set_metadata, torch_logits, write_onnx
 
 __all__ = [

@@ -213,6 +213,6 @@ def iou_report(fp32_path: str | Path, int8_path: str | Path, val: FrameSample, t
 def refuse_message(report: Int8Report) -> str:
     return (
         f"int8 model loses {report.drop:.2f} IoU points against fp32 (limit {report.max_drop:.1f}) on {report.source}; "
-        "not written. Calibrate on more frames (--calib DIR) or pass --force to keep it"
+        "not written. Calibrate on more frames (`calib` DIR) or pass `force` to keep it"
     )
 

@@ -16,7 +16,7 @@ from torch import nn
 
 from edge.errors import ModelError
 from edge.meta import ModelMeta
-from edge.model import FCN8s, count_parameters
+from edge.train.model import FCN8s, count_parameters
 
 __all__ = ["to_single_channel"]
 

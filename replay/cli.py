@@ -1,6 +1,6 @@
 """``depthseg-replay``: run the ONNX model over a recorded or simulated MCAP, as the robot would.
 
-Thin wrapper: `replay.reader.open_depth_stream` finds the topics, `edge.infer.Segmenter` runs the
+Thin wrapper: `edge.io.reader.open_depth_stream` finds the topics, `edge.infer.Segmenter` runs the
 model, `replay.replay.replay` loops, scores and writes. Informational lines (which topic was
 chosen, camera intrinsics) go to stderr; the summary (or ``--json``) goes to stdout. Edge path:
 no torch import here.
@@ -79,7 +79,7 @@ def _report(summary, as_json: bool) -> None:
 
 def _body(args: argparse.Namespace) -> int:
     from edge.infer import Segmenter
-    from replay.reader import open_depth_stream
+    from edge.io.reader import open_depth_stream
     from replay.replay import ReplayDataError, replay
 
     if args.threads < 1:
@@ -127,8 +127,9 @@ def _body(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return run(PROG, lambda: _body(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    return run(PROG, lambda: _body(args), parser, aliases={"depth_topic": "--topic"})
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -28,17 +28,24 @@ from typing import Any, Protocol
 import numpy as np
 
 from edge.errors import ConfigError, DataError, McapDataError
-from edge.frames import Frame
-from edge.metrics import FrameScores, MetricAccumulator, MetricSummary, confusion
+from edge.io import Frame
+from edge.metrics import (
+    UNKNOWN,
+    FrameScores,
+    MetricAccumulator,
+    MetricSummary,
+    confusion,
+    logit,
+    segmentation_mask,
+)
 
 __all__ = ["replay", "ReplaySummary", "FrameResult", "LatencyHistogram", "ReplayDataError", "UNKNOWN"]
 
-UNKNOWN = 255
 LATE_SLACK_S = 0.005  # a paced frame starting more than this after its due time counts as late
 
 
 class _Prediction(Protocol):
-    prob: np.ndarray
+    prob: np.ndarray  # (and ``logits`` when the segmenter gives them, as edge.infer.Segmenter does)
     mask: np.ndarray
     valid: np.ndarray
     timings: dict[str, float]
@@ -206,10 +213,14 @@ class ReplaySummary:
 
 
 def _mask_for(pred: _Prediction, threshold: float | None) -> np.ndarray:
+    """The segmenter's mask, or (with a ``threshold`` of the caller's) the one threshold rule of
+    `edge.metrics` applied to its logits, so a replay at 0.9999 agrees with the Segmenter, eval and tune."""
     if threshold is None:
         return np.asarray(pred.mask, dtype=np.uint8)
-    valid = np.asarray(pred.valid, dtype=bool)
-    return np.where(valid, (np.asarray(pred.prob) >= threshold).astype(np.uint8), np.uint8(UNKNOWN)).astype(np.uint8)
+    logits = getattr(pred, "logits", None)
+    if logits is None:
+        logits = logit(np.asarray(pred.prob, dtype=np.float32))
+    return segmentation_mask(logits, pred.valid, threshold)
 
 
 def replay(
@@ -223,7 +234,7 @@ def replay(
 ) -> ReplaySummary:
     """Segment every frame of ``stream``; optionally pace, score, and write ``out``.
 
-    ``stream`` is normally a `replay.reader.DepthStream` (any iterable of `Frame` works, then
+    ``stream`` is normally a `edge.io.reader.DepthStream` (any iterable of `Frame` works, then
     ``out`` copies nothing through). ``threshold`` overrides the segmenter's. When the stream
     breaks mid-way (damaged file, malformed frame), ``out`` is still completed and a
     `ReplayDataError` carrying the partial summary is raised. The first frame is first run
@@ -231,9 +242,9 @@ def replay(
     percentiles describe the steady state; the wall clock for frames/s includes it.
     """
     if rate is not None and not (rate > 0 and math.isfinite(rate)):
-        raise ConfigError(f"--rate must be a positive number (1.0 = real time), got {rate}")
+        raise ConfigError(f"`rate` must be a positive number (1.0 = real time), got {rate}")
     if threshold is not None and not 0.0 < float(threshold) < 1.0:
-        raise ConfigError(f"--threshold must lie strictly between 0 and 1, got {threshold}")
+        raise ConfigError(f"`threshold` must lie strictly between 0 and 1, got {threshold}")
     thr = float(threshold) if threshold is not None else float(segmenter.threshold)
     over = None if threshold is None or float(threshold) == float(segmenter.threshold) else float(threshold)
 

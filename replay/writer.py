@@ -18,23 +18,20 @@ complete, indexed MCAP. Metadata and attachment records of the input are not cop
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
-from typing import BinaryIO
 
 import numpy as np
 from mcap.records import Channel, Message, Schema
-from mcap.writer import CompressionType, Writer
 
-from edge import rosmsg
 from edge.errors import DataError
-from edge.frames import Frame, atomic_path
+from edge.io.frames import Frame
+from edge.io.writer import McapWriter
+from edge.metrics import UNKNOWN
 
 __all__ = ["ReplayWriter", "overlay_rgb", "MASK_TOPIC", "OVERLAY_TOPIC", "UNKNOWN", "OBJECT_RGB", "UNKNOWN_RGB"]
 
 MASK_TOPIC = "/depthseg/mask"
 OVERLAY_TOPIC = "/depthseg/overlay"
-UNKNOWN = 255
 OBJECT_RGB = np.array([255, 140, 0], dtype=np.float32)  # orange
 UNKNOWN_RGB = np.array([255, 0, 255], dtype=np.uint8)  # magenta
 
@@ -71,8 +68,8 @@ def overlay_rgb(depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return _LUT.take(row, axis=0)
 
 
-class ReplayWriter:
-    """Copy a recording's messages and add mask and overlay images; atomic on `close`."""
+class ReplayWriter(McapWriter):
+    """Copy a recording's messages and add mask and overlay images; atomic on `close` (`McapWriter`)."""
 
     def __init__(
         self,
@@ -82,26 +79,14 @@ class ReplayWriter:
         chunk_size: int = 4 * 1024 * 1024,
         overlay: bool = True,
     ) -> None:
-        self.path = Path(path)
-        if self.path.is_dir():
-            raise DataError(f"{self.path}: is a directory; --out needs a file name such as out.mcap")
-        if not self.path.parent.exists():
-            raise DataError(f"{self.path.parent}: output directory does not exist")
-        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
-        if compression not in comp:
-            raise DataError(f"unknown compression '{compression}'; choose from {sorted(comp)}")
-        self.tmp = atomic_path(self.path)
-        self._fh: BinaryIO = open(self.tmp, "wb")
-        self._w = Writer(self._fh, chunk_size=chunk_size, compression=comp[compression])
-        self._w.start(profile=profile if profile in ("ros2", "") else "", library="depthseg-replay")
+        super().__init__(path, profile=profile if profile in ("ros2", "") else "", library="depthseg-replay",
+                         compression=compression, chunk_size=chunk_size)
         self._schemas: dict[int, int] = {}
         self._channels: dict[int, int] = {}
-        img = self._w.register_schema(rosmsg.IMAGE_TYPE, "ros2msg", rosmsg.IMAGE_MSGDEF.encode())
-        self._mask_ch = self._w.register_channel(MASK_TOPIC, "cdr", img)
-        self._overlay_ch = self._w.register_channel(OVERLAY_TOPIC, "cdr", img) if overlay else None
+        self._mask_ch = self.image_channel(MASK_TOPIC)
+        self._overlay_ch = self.image_channel(OVERLAY_TOPIC) if overlay else None
         self.copied = 0
         self.written = 0
-        self._closed = False
 
     def copy(self, schema: Schema | None, channel: Channel, message: Message) -> None:
         """Pass one input message through unchanged (a `DepthStream.message_hook`)."""
@@ -126,47 +111,8 @@ class ReplayWriter:
         stamp = int(frame.extra.get("header_stamp_ns") or frame.stamp_ns)
         frame_id = str(frame.extra.get("frame_id", ""))
         t = int(frame.stamp_ns)
-        seq = self.written
         m = np.ascontiguousarray(mask, dtype=np.uint8)
-        self._w.add_message(self._mask_ch, log_time=t, publish_time=t, sequence=seq,
-                            data=rosmsg.encode_image(stamp, frame_id, m, "mono8"))
+        self.add_image(self._mask_ch, t, stamp, frame_id, m, "mono8", self.written)
         if self._overlay_ch is not None:
-            rgb = overlay_rgb(frame.depth, m)
-            self._w.add_message(self._overlay_ch, log_time=t, publish_time=t, sequence=seq,
-                                data=rosmsg.encode_image(stamp, frame_id, rgb, "rgb8"))
+            self.add_image(self._overlay_ch, t, stamp, frame_id, overlay_rgb(frame.depth, m), "rgb8", self.written)
         self.written += 1
-
-    def close(self) -> None:
-        """Finish the index and footer, then rename into place."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._w.finish()
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-            self._fh.close()
-            os.replace(self.tmp, self.path)
-        except BaseException:
-            self._fh.close()
-            self.tmp.unlink(missing_ok=True)
-            raise
-
-    def abort(self) -> None:
-        """Drop the partial output (nothing appears under the final name)."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._fh.close()
-        finally:
-            self.tmp.unlink(missing_ok=True)
-
-    def __enter__(self) -> ReplayWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()

@@ -1,7 +1,7 @@
 """``depthseg-sim``: generate labelled pico flexx frames into sharded MCAP files, in parallel.
 
 Why shards of whole frames: shard k holds frames [k*K, (k+1)*K) and is written by one worker
-through `edge.frames.FrameWriter`, which writes a temporary file and renames it only when
+through `edge.io.FrameWriter`, which writes a temporary file and renames it only when
 complete. A killed run therefore leaves complete shards (kept) and temporary files (deleted
 and regenerated on resume); since frame i depends only on (seed, i), a resumed run produces
 exactly the frames an uninterrupted one would: none lost, none duplicated.
@@ -74,7 +74,7 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
     """Generate frames [start, stop) into one shard; the file appears only when complete."""
     import numpy as np
 
-    from edge.frames import FrameWriter
+    from edge.io import FrameWriter
     from sim.generate import generate_frame
 
     start, stop = task
@@ -104,11 +104,9 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
-    from edge.frames import atomic_path
+    from edge.io import write_json_atomic
 
-    tmp = atomic_path(path)
-    tmp.write_text(json.dumps(obj, indent=1, sort_keys=True))
-    os.replace(tmp, path)
+    write_json_atomic(path, obj, indent=1)
 
 
 def _prepare_out(out: Path) -> None:
@@ -322,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
         from sim.importers import import_main  # owned by the importers; loaded only when asked
 
         return import_main(argv[1:])
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
 
     def body() -> int:
         summary = simulate(
@@ -348,7 +347,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Bring depth frames made by other tools into the depthseg MCAP layout (`edge.frames`).
+"""Bring depth frames made by other tools into the depthseg MCAP layout (`edge.io`).
 
 Two sources, so training, evaluation and replay read one format:
 
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import DataError
-from edge.frames import FrameWriter
+from edge.io import FrameWriter
 from edge.meta import fov_intrinsics
 
 __all__ = [
@@ -127,7 +127,7 @@ def detect_background_id(scans: Sequence[BlensorScan]) -> float:
     if len(singles) > 1:
         raise DataError(
             f"scans with a single object id disagree on the background id ({sorted(singles)}); "
-            "pass --background-id"
+            "pass `background_id`"
         )
     if singles:
         return singles.pop()
@@ -268,7 +268,7 @@ def read_ply(path: str | Path, width: int = BLENSOR_WIDTH, height: int = BLENSOR
     if count != n:
         raise DataError(
             f"{p}: PLY has {count} vertices; expected {n} ({width} x {height}, one per pixel, as "
-            "royaleviewer exports a frame); pass --width/--height for another camera"
+            "royaleviewer exports a frame); pass `width`/`height` for another camera"
         )
     missing = [c for c in ("x", "y", "z") if c not in props]
     if missing:
@@ -381,11 +381,11 @@ def find_inputs(paths: Iterable[str | Path], pattern: str, what: str) -> list[Pa
 def _check_out(out: str | Path) -> Path:
     o = Path(out)
     if o.is_dir():
-        raise DataError(f"--out {o}: is a directory; give a file name ending in .mcap")
+        raise DataError(f"`out` {o}: is a directory; give a file name ending in .mcap")
     if o.suffix != ".mcap":
-        raise DataError(f"--out {o}: name must end in .mcap")
+        raise DataError(f"`out` {o}: name must end in .mcap")
     if not o.parent.exists():
-        raise DataError(f"--out {o}: directory {o.parent} does not exist; create it first")
+        raise DataError(f"`out` {o}: directory {o.parent} does not exist; create it first")
     return o
 
 
@@ -584,7 +584,7 @@ def import_main(argv: list[str] | None = None) -> int:
             )
         return 0
 
-    return run(prog, body)
+    return run(prog, body, ap)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -591,12 +591,12 @@ class MeshLibrary:
     def list_files(folder: str | Path) -> list[Path]:
         d = Path(folder)
         if not d.exists():
-            raise ConfigError(f"--objects {d}: no such folder; give a folder of .obj/.stl/.off/.ply meshes")
+            raise ConfigError(f"`objects` {d}: no such folder; give a folder of .obj/.stl/.off/.ply meshes")
         if not d.is_dir():
-            raise ConfigError(f"--objects {d}: not a folder; give a folder of .obj/.stl/.off/.ply meshes")
+            raise ConfigError(f"`objects` {d}: not a folder; give a folder of .obj/.stl/.off/.ply meshes")
         files = sorted(p for p in d.rglob("*") if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
         if not files:
-            raise ConfigError(f"--objects {d}: no .obj/.stl/.off/.ply files in the folder")
+            raise ConfigError(f"`objects` {d}: no .obj/.stl/.off/.ply files in the folder")
         return files
 
     @classmethod
@@ -619,7 +619,7 @@ class MeshLibrary:
             if progress is not None:
                 progress(1)
         if not good:
-            raise ConfigError(f"--objects {folder}: none of the {len(files)} mesh files could be read")
+            raise ConfigError(f"`objects` {folder}: none of the {len(files)} mesh files could be read")
         return cls(good)
 
     def __len__(self) -> int:

@@ -203,12 +203,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def body() -> int:
-        from edge.frames import atomic_path
+        from edge.io import write_bytes_atomic
 
         res = matrix(args)
-        tmp = atomic_path(args.json_out)
-        tmp.write_text(json.dumps(res, indent=1, sort_keys=True, default=str))
-        tmp.replace(args.json_out)
+        write_bytes_atomic(args.json_out, json.dumps(res, indent=1, sort_keys=True, default=str).encode())
         print(_md(res, args))
         return 0
 

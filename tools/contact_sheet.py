@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from edge.cliutil import run  # noqa: E402
 from edge.errors import ConfigError, DataError  # noqa: E402
-from edge.frames import Frame, iter_frames, write_bytes_atomic  # noqa: E402
+from edge.io import Frame, iter_frames, write_bytes_atomic  # noqa: E402
 from edge.preprocess import valid_mask  # noqa: E402
 
 PROG = "contact_sheet"
@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {out} ({sheet.shape[1]} x {sheet.shape[0]} px)")
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":

@@ -26,7 +26,7 @@ from edge.cliutil import print_json, run  # noqa: E402
 from edge.errors import DataError  # noqa: E402
 from edge.eval_cli import add_boundary_args, format_table  # noqa: E402
 from edge.evaluate import FIGURE_PICKS, evaluate, model_label  # noqa: E402
-from edge.frames import Frame  # noqa: E402
+from edge.io import Frame  # noqa: E402
 
 PROG = "eval_blensor"
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "blensor"
@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_table(report, model_label(predictor.meta)))
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,6 @@ time (nothing from it is committed but this figure). Torch-free (edge path).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -25,8 +24,8 @@ if str(ROOT) not in sys.path:
 
 from edge.baseline import PlaneBaseline, intrinsics_for  # noqa: E402
 from edge.cliutil import print_json, run  # noqa: E402
-from edge.frames import atomic_path  # noqa: E402
 from edge.infer import Segmenter  # noqa: E402
+from edge.io import write_bytes_atomic  # noqa: E402
 from edge.preprocess import preprocess, valid_mask  # noqa: E402
 from sim.importers import fit_intrinsics, read_ply  # noqa: E402
 
@@ -93,10 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         row2 = np.hstack(tiles[3:] + [np.full_like(tiles[0], 255)])
         sheet = np.vstack([row1, row2])
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = atomic_path(args.out)
         ok, buf = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
-        tmp.write_bytes(buf.tobytes())
-        os.replace(tmp, args.out)
+        write_bytes_atomic(args.out, buf.tobytes())
         out = {"ply": str(args.ply), "model": str(seg.path), "out": str(args.out), "panels": stats}
         if args.json:
             print_json(out)

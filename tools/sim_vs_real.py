@@ -19,7 +19,6 @@ and prints the table. The real capture is read at run time and never copied into
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -32,7 +31,7 @@ import numpy as np  # noqa: E402
 
 from edge.cliutil import print_json, run  # noqa: E402
 from edge.errors import ConfigError, DataError  # noqa: E402
-from edge.frames import atomic_path  # noqa: E402
+from edge.io import atomic_write, write_bytes_atomic  # noqa: E402
 from edge.preprocess import valid_mask  # noqa: E402
 from sim.realism import CORNERS, Realism, flying_pixels, invalid_regions, realism  # noqa: E402
 
@@ -191,22 +190,15 @@ def figure(
         if c == 0 and r > 0:
             cell.set_text_props(ha="left")
             cell.PAD = 0.02
-    tmp = atomic_path(out)
     try:
-        fig.savefig(tmp, format="png", dpi=88, bbox_inches="tight", pil_kwargs={"optimize": True})
-        os.replace(tmp, out)
+        with atomic_write(out) as tmp:
+            fig.savefig(tmp, format="png", dpi=88, bbox_inches="tight", pil_kwargs={"optimize": True})
     finally:
         plt.close(fig)
-        tmp.unlink(missing_ok=True)
 
 
 def _write_text(path: Path, text: str) -> None:
-    tmp = atomic_path(path)
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_bytes_atomic(path, text.encode())
 
 
 parser = argparse.ArgumentParser(

@@ -11,9 +11,9 @@ import pytest
 from infergen import TORCH_BLOCKER, linear_model, raw_model
 
 from edge.bench import ModelSpec, bench_models, cpu_info, stats
-from edge.bench_cli import main
 from edge.errors import ConfigError
 from edge.sampleframes import synthetic_frames
+from export.bench_cli import main
 
 REQUIRED = {"name", "p50_ms", "p90_ms", "p99_ms", "fps", "whole_frame_p50_ms"}
 
@@ -75,7 +75,7 @@ def test_cli_table_lists_every_model(models, capsys):
 
 def test_cli_json_where_torch_cannot_be_imported(models):
     code = TORCH_BLOCKER + f"""
-from edge.bench_cli import main
+from export.bench_cli import main
 rc = main(["--model", {str(models[0])!r}, {str(models[1])!r}, "--threads", "1", "--runs", "4", "--warmup", "1", "--json"])
 assert not any(m == "torch" or m.startswith("torch.") for m in sys.modules), "torch was imported"
 sys.exit(rc)
@@ -95,7 +95,7 @@ def test_bad_model_is_one_line_and_nonzero(tmp_path, kind):
     path = tmp_path / "m.onnx"
     if kind == "corrupt":
         path.write_bytes(b"definitely not onnx")
-    proc = subprocess.run([sys.executable, "-m", "edge.bench_cli", "--model", str(path), "--runs", "2"],
+    proc = subprocess.run([sys.executable, "-m", "export.bench_cli", "--model", str(path), "--runs", "2"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2
     err = proc.stderr.strip()

@@ -12,7 +12,7 @@ import pytest
 
 from edge.errors import ConfigError, DataError
 from edge.evaluate import evaluate
-from edge.frames import Frame
+from edge.io import Frame
 from edge.meta import ModelMeta
 from edge.metrics import BreakdownAccumulator, ErrorBreakdown, MetricAccumulator, boundary_band
 from edge.predict import Predictor

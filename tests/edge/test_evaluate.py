@@ -12,7 +12,7 @@ from edge import defaults
 from edge.errors import ConfigError, DataError, ModelError
 from edge.eval_cli import main as eval_main
 from edge.evaluate import COLORS, evaluate, render_figure
-from edge.frames import Frame, FrameWriter, iter_frames
+from edge.io import Frame, FrameWriter, iter_frames
 from edge.meta import ModelMeta, fov_intrinsics
 from edge.metrics import MetricAccumulator, predict_mask
 from edge.predict import Predictor, load_predictor
@@ -48,8 +48,8 @@ def write_frames(path: Path, n: int = 4, labels: bool = True) -> Path:
 def tiny_ckpt(tmp_path_factory) -> Path:
     import torch
 
-    from edge.checkpoint import save_checkpoint
-    from edge.model import build_model
+    from edge.train.checkpoint import save_checkpoint
+    from edge.train.model import build_model
 
     torch.manual_seed(0)
     p = tmp_path_factory.mktemp("model") / "tiny.pt"
@@ -315,12 +315,12 @@ def test_cli_users_recording_auto_and_named_topics(tiny_ckpt, tmp_path, capsys):
 def test_onnx_model_scores_like_its_checkpoint(tiny_ckpt, data, tmp_path, capsys):
     """The same weights as .pt (torch) and .onnx (onnxruntime, edge path) give the same table."""
     onnx_export = pytest.importorskip("export.onnx_export")
-    from edge.checkpoint import load_checkpoint
+    from edge.train.checkpoint import load_checkpoint
 
     model, meta, _ = load_checkpoint(tiny_ckpt)
     onnx_path = onnx_export.export_onnx(model, meta, tmp_path / "tiny.onnx")
     a, b = load_predictor(onnx_path, threads=1), load_predictor(tiny_ckpt, threads=1)
-    assert type(a).__name__ == "OnnxPredictor" and a.meta == b.meta
+    assert type(a).__name__ == "Segmenter" and a.meta == b.meta
     depth, _ = scene(2)
     assert np.abs(a.logits(depth) - b.logits(depth)).max() < 1e-4
     rc = eval_main(["--model", str(onnx_path), "--data", str(data), "--json", "--threads", "1"])

@@ -6,11 +6,11 @@ import pytest
 import torch
 
 from edge import encoders
-from edge.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
-from edge.encoders import VGG_CFGS, VGGEncoder, create_encoder, list_encoders, register_encoder
 from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
-from edge.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
+from edge.train.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
+from edge.train.encoders import VGG_CFGS, VGGEncoder, create_encoder, list_encoders, register_encoder
+from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
 TINY_WIDTH = 0.0625
 STRIDES = {"pool1": 2, "pool2": 4, "pool3": 8, "pool4": 16, "pool5": 32}

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from edge.checkpoint import load_checkpoint, read_checkpoint
-from edge.data import FrameSet, make_batch, split_indices
 from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
-from edge.train import TrainConfig, masked_bce, train
+from edge.train.checkpoint import load_checkpoint, read_checkpoint
+from edge.train.data import FrameSet, make_batch, split_indices
+from edge.train.loop import TrainConfig, masked_bce, train
 from edge.train_cli import main as train_main
 
 META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True)
@@ -72,10 +72,10 @@ def test_resume_continues_from_the_last_epoch(tmp_path) -> None:
     fs = _frames(16)
     tr, va = fs.subset(np.arange(12)), fs.subset(np.arange(12, 16))
     train(META, tr, va, tmp_path, TrainConfig(epochs=2, batch_size=8, seed=0, threads=1))
-    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 1
-    res = train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=8, seed=0, threads=1), resume=True)
-    assert [h["epoch"] for h in res.history] == [0, 1, 2]
     assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 2
+    res = train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=8, seed=0, threads=1), resume=True)
+    assert [h["epoch"] for h in res.history] == [1, 2, 3]
+    assert read_checkpoint(tmp_path / "last.pt")["epoch"] == 3
     with pytest.raises(ConfigError, match="width"):
         train(META.with_(width=0.25), tr, va, tmp_path, TrainConfig(epochs=4, threads=1), resume=True)
 
@@ -115,7 +115,7 @@ def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) 
 
 
 def _write_tiny_mcap(d) -> None:
-    from edge.frames import FrameWriter
+    from edge.io import FrameWriter
 
     d.mkdir()
     fs = _frames(4)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
-from edge.frames import FrameWriter
+from edge.io import FrameWriter
 from edge.meta import ModelMeta, SensorSpec, fov_intrinsics
 from edge.metrics import MetricAccumulator
 from edge.tune import (
@@ -77,7 +77,7 @@ class FakePredictor:
 
 def _frame_objs(items):
     """(logits, label) pairs -> Frame objects whose depth encodes the key for FakePredictor."""
-    from edge.frames import Frame
+    from edge.io import Frame
 
     frames, table = [], {}
     for k, (lg, lab) in enumerate(items):
@@ -266,7 +266,7 @@ def test_tune_reports_heldout_before_and_after_exactly():
 
 
 def test_tune_without_labels_is_a_data_error_with_the_hint():
-    from edge.frames import Frame
+    from edge.io import Frame
 
     frames = [Frame(depth=np.full((4, 4), 0.3, np.float32), stamp_ns=i) for i in range(3)]
     with pytest.raises(DataError, match=r"no labelled frames.*3 frames without labels.*topics present: /a"):
@@ -302,8 +302,8 @@ def data_dir(tmp_path_factory) -> Path:
 def tiny_pt(tmp_path_factory) -> Path:
     import torch
 
-    from edge.checkpoint import save_checkpoint
-    from edge.model import build_model
+    from edge.train.checkpoint import save_checkpoint
+    from edge.train.model import build_model
 
     torch.manual_seed(0)
     meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, sensor=SMALL)
@@ -312,7 +312,7 @@ def tiny_pt(tmp_path_factory) -> Path:
 
 
 def _export(pt: Path, out: Path) -> Path:
-    from edge.checkpoint import load_checkpoint
+    from edge.train.checkpoint import load_checkpoint
     from export.onnx_export import export_onnx
     from export.single_channel import to_single_channel
 
@@ -335,7 +335,7 @@ def _cli(capsys, *argv: str) -> tuple[int, str, str]:
 
 
 def test_cli_tunes_a_checkpoint_and_writes_threshold_and_policy(capsys, data_dir, tiny_pt, tmp_path):
-    from edge.checkpoint import read_checkpoint
+    from edge.train.checkpoint import read_checkpoint
 
     out = tmp_path / "tuned.pt"
     plot = tmp_path / "pr.png"
@@ -356,7 +356,7 @@ def test_cli_tunes_a_checkpoint_and_writes_threshold_and_policy(capsys, data_dir
 @pytest.mark.slow
 def test_threshold_survives_export_of_a_tuned_checkpoint(capsys, data_dir, tiny_pt, tmp_path):
     from edge.infer import Segmenter
-    from edge.threshold_store import read_meta
+    from edge.train.threshold_store import read_meta
 
     tuned = tmp_path / "tuned.pt"
     rc, stdout, err = _cli(capsys, "--model", tiny_pt, "--data", data_dir, "--objective", "recall>=0.9",
@@ -396,7 +396,7 @@ def test_cli_tunes_onnx_in_place_with_backup_and_the_edge_reads_it(capsys, data_
 
     assert eval_main(["--model", str(model), "--data", str(data_dir / "labelled.mcap"), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["threshold"] == d["threshold"]
-    from replay.reader import open_depth_stream
+    from edge.io.reader import open_depth_stream
     from replay.replay import replay
 
     summary = replay(open_depth_stream(data_dir / "labelled.mcap"), seg)
@@ -409,7 +409,7 @@ def test_pseudo_labels_are_reported_and_stored_as_such(capsys, data_dir, tiny_on
                            "--out", out, "--split", "0.34")
     assert rc == 0, err
     assert "pseudo-labels" in stdout and "NOT ground truth" in stdout
-    from edge.threshold_store import read_meta
+    from edge.train.threshold_store import read_meta
 
     assert read_meta(out).threshold_policy.startswith("PSEUDO-LABELS, not ground truth")
 
@@ -439,7 +439,7 @@ def test_cli_objective_errors_are_one_line_and_nonzero(capsys, data_dir, tmp_pat
 
 
 def test_store_refuses_mismatched_out_and_missing_model(tmp_path, tiny_pt):
-    from edge.threshold_store import store_threshold
+    from edge.train.threshold_store import store_threshold
 
     with pytest.raises(ModelError, match="model's type"):
         store_threshold(tiny_pt, 0.7, "p", out=tmp_path / "x.onnx")
@@ -482,7 +482,7 @@ def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
     import shutil
 
     from edge import defaults
-    from edge.threshold_store import read_meta
+    from edge.train.threshold_store import read_meta
 
     pt, onnx_path = tmp_path / "default.pt", tmp_path / "default.onnx"
     shutil.copy(tiny_pt, pt)
@@ -496,7 +496,7 @@ def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
     assert d["also_written"] == [{"written": str(pt), "backup": str(pt) + ".bak"}]
     assert read_meta(onnx_path).threshold == read_meta(pt).threshold == d["threshold"]
     assert read_meta(pt).threshold_policy == d["policy"]
-    from edge.checkpoint import read_checkpoint
+    from edge.train.checkpoint import read_checkpoint
 
     assert ModelMeta.from_dict(read_checkpoint(str(pt) + ".bak")["meta"]).threshold == 0.5
 

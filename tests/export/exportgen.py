@@ -15,9 +15,9 @@ import torch
 from torch import nn
 
 from edge.meta import ModelMeta
-from edge.model import FCN8s, build_model, count_parameters
 from edge.preprocess import preprocess_batch
 from edge.sampleframes import synthetic_frames
+from edge.train.model import FCN8s, build_model, count_parameters
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 

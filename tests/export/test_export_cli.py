@@ -8,9 +8,9 @@ import onnx
 import pytest
 from exportgen import tiny_model
 
-from edge.checkpoint import save_checkpoint
 from edge.infer import Segmenter
 from edge.meta import ModelMeta
+from edge.train.checkpoint import save_checkpoint
 from export.cli import main
 
 

@@ -11,7 +11,7 @@ import pytest
 from mcap.reader import make_reader
 from replaygen import SHARED, T0, scene, write_kind, write_ros2
 
-from edge.frames import FrameWriter
+from edge.io import FrameWriter
 from replay.cli import main
 
 REPO = __import__("pathlib").Path(__file__).resolve().parents[2]
@@ -165,10 +165,10 @@ def test_exported_fcn_replays_like_depthseg_eval(tmp_path, capsys):
     pytest.importorskip("torch")
     onnx_export = pytest.importorskip("export.onnx_export")
     from edge.evaluate import evaluate
-    from edge.frames import iter_frames
+    from edge.io import iter_frames
     from edge.meta import ModelMeta
-    from edge.model import build_model
     from edge.predict import load_predictor
+    from edge.train.model import build_model
 
     meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, threshold=0.5)
     import torch

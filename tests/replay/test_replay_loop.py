@@ -12,9 +12,10 @@ from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
 from replaygen import FakeSegmenter, scene, write_foxglove, write_kind, write_ros2
 
 from edge.errors import ConfigError
-from edge.frames import Frame
+from edge.io import Frame
+from edge.io.reader import open_depth_stream
+from edge.metrics import logit, segmentation_mask
 from edge.preprocess import valid_mask
-from replay.reader import open_depth_stream
 from replay.replay import LatencyHistogram, ReplayDataError, replay
 from replay.writer import MASK_TOPIC, OVERLAY_TOPIC, UNKNOWN_RGB, overlay_rgb
 
@@ -66,7 +67,7 @@ def test_threshold_override_recomputes_the_mask(fake):
         assert s.threshold == t
     for f, m in zip(frames, got[0.9]):
         p = fake.predict(f.depth)
-        assert np.array_equal(m, np.where(p.valid, (p.prob >= 0.9).astype(np.uint8), 255))
+        assert np.array_equal(m, segmentation_mask(logit(p.prob.astype(np.float32)), p.valid, 0.9))
     for bad in (0.0, 1.0, 1.5):
         with pytest.raises(ConfigError, match="threshold"):
             replay(frames, fake, threshold=bad)
@@ -82,7 +83,7 @@ def test_rate_paces_to_the_recording_clock(fake):
     replay(frames, fake, rate=4.0)
     assert time.perf_counter() - t >= 0.045
     for bad in (0.0, -1.0, math.nan, math.inf):
-        with pytest.raises(ConfigError, match="--rate"):
+        with pytest.raises(ConfigError, match="`rate`"):
             replay(frames, fake, rate=bad)
 
 

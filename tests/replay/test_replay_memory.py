@@ -16,8 +16,8 @@ from mcap.writer import CompressionType, Writer
 from replaygen import FakeSegmenter
 
 from edge import rosmsg
-from edge.frames import Frame
-from replay.reader import open_depth_stream
+from edge.io import Frame
+from edge.io.reader import open_depth_stream
 from replay.replay import replay
 
 N = 10_000

@@ -9,8 +9,8 @@ from replaygen import KINDS, T0, scene, write_foxglove, write_kind, write_ros2
 
 from edge import rosmsg
 from edge.errors import McapDataError
-from edge.frames import FrameWriter
-from replay.reader import open_depth_stream
+from edge.io import FrameWriter
+from edge.io.reader import open_depth_stream
 
 
 def same_depth(a: np.ndarray, b: np.ndarray) -> bool:
@@ -81,9 +81,9 @@ def test_several_depth_topics_are_listed_and_topic_chooses(tmp_path):
         open_depth_stream(rec.path)
     msg = str(e.value)
     assert "several depth image topics" in msg and "/cam_a/points_z" in msg and "/cam_b/range_image" in msg
-    assert "--topic" in msg and "\n" not in msg
+    assert "`depth_topic`" in msg and "\n" not in msg
     s = open_depth_stream(rec.path, topic="/cam_b/range_image")
-    assert s.depth_reason == "chosen with --topic" and len(list(s)) == 3
+    assert s.depth_reason == "chosen explicitly" and len(list(s)) == 3
 
 
 def test_depth_name_breaks_a_tie(tmp_path):
@@ -100,7 +100,7 @@ def test_mono16_grey_image_is_not_depth_but_16uc1_is(tmp_path):
 
 def test_missing_topic_lists_image_topics(tmp_path):
     rec = write_ros2(tmp_path / "a.mcap", n=2)
-    with pytest.raises(McapDataError, match=r"no depth topic '/nope'.*/pico_flexx/image_depth.*--topic"):
+    with pytest.raises(McapDataError, match=r"no depth topic '/nope'.*/pico_flexx/image_depth.*`depth_topic`"):
         open_depth_stream(rec.path, topic="/nope")
     with pytest.raises(McapDataError, match=r"no labels topic '/nope'"):
         open_depth_stream(rec.path, labels_topic="/nope")

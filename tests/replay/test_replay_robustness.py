@@ -18,7 +18,7 @@ from replaygen import KINDS, SHARED, scene, write_foxglove, write_kind, write_ro
 
 from edge import rosmsg
 from edge.errors import McapDataError
-from replay.reader import open_depth_stream
+from edge.io.reader import open_depth_stream
 
 N = 8
 

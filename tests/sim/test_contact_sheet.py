@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from edge.frames import FrameWriter
+from edge.io import FrameWriter
 
 TOOL = Path(__file__).resolve().parents[2] / "tools" / "contact_sheet.py"
 

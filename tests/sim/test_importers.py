@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from edge.errors import DataError
-from edge.frames import TOPIC_INFO, iter_frames
+from edge.io import TOPIC_INFO, iter_frames
 from sim import importers as imp
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared"  # ../shared from the repo root

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from edge import frames as fr
+import edge.io as fr
 from sim import cli
 
 TINY = {"scene": {"n_objects": [1, 3]}}

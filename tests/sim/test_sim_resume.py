@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from edge.frames import TOPIC_DEPTH, iter_frames
+from edge.io import TOPIC_DEPTH, iter_frames
 from sim import cli
 
 FRAMES, SHARD = 30, 3

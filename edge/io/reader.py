@@ -41,8 +41,8 @@ from mcap.records import Channel, Chunk, Header, Message, Schema
 from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, breakup_chunk
 
 from edge import rosmsg
-from edge.errors import DepthsegError, McapDataError
-from edge.frames import Frame
+from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
+from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame
 
 __all__ = [
     "DepthStream",
@@ -50,6 +50,9 @@ __all__ = [
     "DEPTH_ENCODINGS",
     "LABEL_ENCODINGS",
     "MessageHook",
+    "list_mcap_files",
+    "open_frames",
+    "iter_frames",
 ]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -73,6 +76,7 @@ PEEK_BYTES = 64 * 1024 * 1024  # how far to look for the first message of each i
 MAX_CHUNK_BYTES = 1 << 30  # a chunk claiming more than this decompressed is corrupt, not data
 DEFAULT_WINDOW = 32  # frames a depth frame may wait for its label
 DEFAULT_TOLERANCE_NS = 1_000_000  # 1 ms: labels share the depth header stamp in practice
+EXTRA_TOPICS = {"clean": TOPIC_CLEAN, "scene": TOPIC_SCENE}  # what the simulator records beside each frame
 
 MessageHook = Callable[[Schema | None, Channel, Message], None]
 
@@ -349,7 +353,7 @@ def _depth_metres(img: _Img, what: str) -> np.ndarray:
     if scale is None:
         raise McapDataError(
             f"{what}: pixel encoding '{img.encoding}' is not a depth image; expected 32FC1 (metres) or "
-            "16UC1 (millimetres); choose the depth topic with --topic"
+            "16UC1 (millimetres); choose the depth topic with `depth_topic`"
         )
     if scale == 1.0:
         return arr.astype(np.float32, copy=False)
@@ -393,7 +397,7 @@ def _pick_depth(topics: dict[str, _TopicInfo], path: Path, damage: str | None) -
         if len(named) == 1:
             return named[0].topic, f"only depth-named {named[0].first_encoding} image topic among {len(cands)}"
         raise McapDataError(
-            f"{path}: several depth image topics: {_list([t.describe() for t in cands])}; choose one with --topic"
+            f"{path}: several depth image topics: {_list([t.describe() for t in cands])}; choose one with `depth_topic`"
         )
     if cands:
         t = cands[0]
@@ -402,7 +406,7 @@ def _pick_depth(topics: dict[str, _TopicInfo], path: Path, damage: str | None) -
     if images:
         raise McapDataError(
             f"{path}: no depth image topic (32FC1 metres or 16UC1 millimetres){where}; image topics: "
-            f"{_list([t.describe() for t in images])}; choose one with --topic if it holds depth"
+            f"{_list([t.describe() for t in images])}; choose one with `depth_topic` if it holds depth"
         )
     if not topics:
         raise McapDataError(f"{path}: the recording holds no messages{where}")
@@ -461,49 +465,66 @@ def _check_topic(topics: dict[str, _TopicInfo], topic: str, role: str, path: Pat
 
 
 class _Pairer:
-    """Attach labels to depth frames by timestamp, in order, holding at most ``window`` of each."""
+    """Attach labels (and the simulator's extras) to depth frames by timestamp, in file order.
 
-    def __init__(self, with_labels: bool, tolerance_ns: int, window: int) -> None:
-        self.with_labels = with_labels
+    The one pairing rule: an attachment belongs to a depth frame when their header stamps differ
+    by at most the tolerance; when either header stamp is 0 (no stamp: the scene JSON, some
+    recorders), their log times are compared instead, so a stamp is never compared with a log
+    time. At most ``window`` frames and ``window`` attachments of each kind are held.
+    """
+
+    def __init__(self, kinds: tuple[str, ...], tolerance_ns: int, window: int) -> None:
+        self.kinds = kinds  # Frame attributes to fill: "label", "clean", "scene"
         self.tol = tolerance_ns
         self.window = window
         self.frames: deque[Frame] = deque()
-        self.labels: deque[tuple[int, np.ndarray]] = deque()
-        self.last_label_key: int | None = None
+        self.pending: dict[str, deque[tuple[int, int, Any]]] = {k: deque() for k in kinds}
+        self.last: dict[str, tuple[int, int] | None] = {k: None for k in kinds}
 
     @staticmethod
-    def _key(fr: Frame) -> int:
-        return fr.extra["match_ns"]
+    def _times(fr: Frame) -> tuple[int, int]:
+        return fr.extra.get("header_stamp_ns", 0), fr.stamp_ns
+
+    def _delta(self, fr: Frame, stamp: int, log: int) -> int:
+        """Attachment time minus frame time, on the clock both have."""
+        fs, fl = self._times(fr)
+        return stamp - fs if stamp > 0 and fs > 0 else log - fl
 
     def add_depth(self, fr: Frame) -> None:
-        if self.with_labels:
-            k = self._key(fr)
-            for i, (lk, lab) in enumerate(self.labels):
-                if abs(lk - k) <= self.tol:
-                    fr.label = lab
-                    del self.labels[i]
+        for kind in self.kinds:
+            q = self.pending[kind]
+            for i, (stamp, log, value) in enumerate(q):
+                if abs(self._delta(fr, stamp, log)) <= self.tol:
+                    setattr(fr, kind, value)
+                    del q[i]
                     break
         self.frames.append(fr)
 
-    def add_label(self, key: int, lab: np.ndarray) -> None:
-        self.last_label_key = key if self.last_label_key is None else max(self.last_label_key, key)
+    def add(self, kind: str, stamp: int, log: int, value: Any) -> None:
+        self.last[kind] = (stamp, log)
         for fr in self.frames:
-            if fr.label is None and abs(self._key(fr) - key) <= self.tol:
-                fr.label = lab
+            if getattr(fr, kind) is None and abs(self._delta(fr, stamp, log)) <= self.tol:
+                setattr(fr, kind, value)
                 return
-        self.labels.append((key, lab))
-        while len(self.labels) > self.window:
-            self.labels.popleft()
+        q = self.pending[kind]
+        q.append((stamp, log, value))
+        while len(q) > self.window:
+            q.popleft()
+
+    def _complete(self, fr: Frame) -> bool:
+        """Every kind attached, or the stream of that kind has moved past the frame."""
+        for kind in self.kinds:
+            if getattr(fr, kind) is not None:
+                continue
+            last = self.last[kind]
+            if last is None or self._delta(fr, *last) <= self.tol:
+                return False
+        return True
 
     def ready(self) -> Iterator[Frame]:
         while self.frames:
             head = self.frames[0]
-            if (
-                not self.with_labels
-                or head.label is not None
-                or len(self.frames) > self.window
-                or (self.last_label_key is not None and self.last_label_key > self._key(head) + self.tol)
-            ):
+            if len(self.frames) > self.window or self._complete(head):
                 yield self.frames.popleft()
             else:
                 return
@@ -540,8 +561,10 @@ class DepthStream:
         profile: str,
         tolerance_ns: int,
         window: int,
+        extra_topics: dict[str, str] | None = None,
     ) -> None:
         self.path = path
+        self.extra_topics = dict(extra_topics or {})  # "clean"/"scene" -> topic (simulated data)
         self.size = size
         self.topics = topics
         self.depth_topic = depth_topic
@@ -569,9 +592,11 @@ class DepthStream:
     def __iter__(self) -> Iterator[Frame]:
         self.frames_read = 0
         self.damage = None
-        pairer = _Pairer(self.labels_topic is not None, self.tolerance_ns, self.window)
+        kinds = (("label",) if self.labels_topic is not None else ()) + tuple(self.extra_topics)
+        pairer = _Pairer(kinds, self.tolerance_ns, self.window)
+        extra_kind = {t: k for k, t in self.extra_topics.items()}
         decoders: dict[int, _ChannelDecoder] = {}
-        wanted = {self.depth_topic, self.labels_topic, self.info_topic} - {None}
+        wanted = {self.depth_topic, self.labels_topic, self.info_topic, *extra_kind} - {None}
         hook = self.message_hook
         n_depth = 0
         name = self.path.name
@@ -584,6 +609,9 @@ class DepthStream:
                     topic = channel.topic
                     if topic not in wanted:
                         continue
+                    if extra_kind.get(topic) == "scene":
+                        pairer.add("scene", 0, msg.log_time, json.loads(msg.data))
+                        continue
                     dec = decoders.get(channel.id)
                     if dec is None:
                         dec = decoders[channel.id] = _ChannelDecoder(schema, channel)
@@ -591,12 +619,11 @@ class DepthStream:
                         what = f"{name} {topic} message {n_depth} (log time {msg.log_time} ns)"
                         img = dec.image(msg.data, what)
                         depth = _depth_metres(img, what)
-                        match = img.stamp_ns if img.stamp_ns > 0 else msg.log_time
                         pairer.add_depth(
                             Frame(
                                 depth=depth, stamp_ns=msg.log_time, info=self.camera_info, topic=topic,
                                 extra={
-                                    "index": n_depth, "header_stamp_ns": img.stamp_ns, "match_ns": match,
+                                    "index": n_depth, "header_stamp_ns": img.stamp_ns,
                                     "frame_id": img.frame_id, "encoding": img.encoding,
                                     "publish_time": msg.publish_time, "sequence": msg.sequence,
                                 },
@@ -606,7 +633,11 @@ class DepthStream:
                     elif topic == self.labels_topic:
                         what = f"{name} {topic} message at log time {msg.log_time} ns"
                         img = dec.image(msg.data, what)
-                        pairer.add_label(img.stamp_ns if img.stamp_ns > 0 else msg.log_time, _label_mask(img, what))
+                        pairer.add("label", img.stamp_ns, msg.log_time, _label_mask(img, what))
+                    elif topic in extra_kind:
+                        what = f"{name} {topic} message at log time {msg.log_time} ns"
+                        img = dec.image(msg.data, what)
+                        pairer.add("clean", img.stamp_ns, msg.log_time, _depth_metres(img, what))
                     else:
                         self.camera_info = dec.info(msg.data, f"{name} {topic}")
                     for fr in pairer.ready():
@@ -687,11 +718,13 @@ def open_depth_stream(
     tolerance_ns: int = DEFAULT_TOLERANCE_NS,
     window: int = DEFAULT_WINDOW,
     peek_bytes: int = PEEK_BYTES,
+    extras: tuple[str, ...] = (),
 ) -> DepthStream:
     """Open ``path`` and decide which topics hold depth, labels and camera info.
 
     ``topic`` / ``labels_topic`` override the automatic choice (``labels_topic=""`` disables
-    labels). Raises `McapDataError` (one line) when the file is not a readable recording or holds
+    labels). ``extras`` (``"clean"``, ``"scene"``) also pairs the simulator's noise-free depth
+    and scene JSON (`edge.io.frames` layout) with each frame when the file has them. Raises `McapDataError` (one line) when the file is not a readable recording or holds
     no usable depth topic; damage *after* the first depth frame is reported during iteration.
     """
     p = Path(path)
@@ -746,14 +779,14 @@ def open_depth_stream(
     except _Damage as d:
         damage = f"byte {d.offset}: {d.what}"
     if topic:
-        _check_topic(topics, topic, "depth", p, "--topic")
-        depth, reason = topic, "chosen with --topic"
+        _check_topic(topics, topic, "depth", p, "`depth_topic`")
+        depth, reason = topic, "chosen explicitly"
     else:
         depth, reason = _pick_depth(topics, p, damage)
     if labels_topic:
-        _check_topic(topics, labels_topic, "labels", p, "--labels-topic")
+        _check_topic(topics, labels_topic, "labels", p, "`labels_topic`")
         if labels_topic == depth:
-            raise McapDataError(f"{p}: --labels-topic {labels_topic} is the depth topic; choose the label topic")
+            raise McapDataError(f"{p}: `labels_topic` {labels_topic} is the depth topic; choose the label topic")
         labels: str | None = labels_topic
     elif labels_topic == "":
         labels = None
@@ -767,10 +800,97 @@ def open_depth_stream(
         if frame_count == 0:
             raise McapDataError(f"{p}: topic {depth} has no messages; nothing to replay")
     profile = headers[0].profile if headers else ""
+    unknown = set(extras) - set(EXTRA_TOPICS)
+    if unknown:
+        raise ConfigError(f"unknown extras {sorted(unknown)}; choose from {sorted(EXTRA_TOPICS)}")
+    extra_topics = {k: EXTRA_TOPICS[k] for k in extras if EXTRA_TOPICS[k] in topics and EXTRA_TOPICS[k] != depth}
     stream = DepthStream(
         p, size, topics, depth, reason, labels, info_topic, camera_info, frame_count, profile,
-        int(tolerance_ns), int(window),
+        int(tolerance_ns), int(window), extra_topics,
     )
     if summ is not None:
         stream._summary_records = (dict(summ[1]), dict(summ[0]))
     return stream
+
+
+# ---------------------------------------------------------------------------- files and directories
+
+
+def list_mcap_files(path: str | Path) -> list[Path]:
+    """One .mcap file, or the complete .mcap files of a directory (sorted; hidden temp files skipped)."""
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: no such file or directory")
+    if p.is_dir():
+        files = sorted(f for f in p.glob("*.mcap") if not f.name.startswith("."))
+        if not files:
+            raise DataError(f"{p}: directory holds no .mcap files; generate some with depthseg-sim --out {p}")
+        return files
+    return [p]
+
+
+def open_frames(
+    path: str | Path,
+    depth_topic: str | None = None,
+    labels_topic: str | None = None,
+    *,
+    require_labels: bool = False,
+    extras: tuple[str, ...] = (),
+    tolerance_ns: int = DEFAULT_TOLERANCE_NS,
+) -> tuple[Iterator[Frame], int | None]:
+    """Frames of a .mcap file or of every recording in a directory, and their count when known.
+
+    Every file is opened (topics detected, labels checked) before the first frame is delivered,
+    so a missing label topic fails at once instead of after minutes of work. Training, evaluation,
+    tuning and the tools all read through here, so a recording one of them accepts, all accept.
+
+    Args:
+        path: a .mcap file or a directory of them.
+        depth_topic: the depth Image topic (None: detected per file).
+        labels_topic: the label Image topic (None: detected; ``""``: no labels).
+        require_labels: raise when a file has no label topic or no label message.
+        extras: also pair the simulator's ``"clean"`` depth and/or ``"scene"`` JSON.
+        tolerance_ns: largest stamp difference of a label and its depth frame.
+
+    Returns:
+        (a generator of `Frame` over all files in order, the number of depth frames or None).
+
+    Raises:
+        DataError: no such path, no recording, or (with ``require_labels``) no labels.
+        McapDataError: a file is not a readable recording.
+    """
+    streams = []
+    total: int | None = 0
+    for f in list_mcap_files(path):
+        st = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic, tolerance_ns=tolerance_ns,
+                               extras=extras)
+        if require_labels:
+            lt = st.topics.get(st.labels_topic) if st.labels_topic else None
+            if lt is None or lt.n_messages == 0:
+                present = sorted(t.topic for t in st.topics.values() if t.n_messages != 0)
+                raise DataError(
+                    f"{f}: no labels found for depth topic {st.depth_topic} (looked for a mono8 Image topic named "
+                    f"'label(s)'); topics present: {', '.join(present) or 'none'}; name it with `labels_topic`"
+                )
+        streams.append(st)
+        total = None if total is None or st.frame_count is None else total + st.frame_count
+
+    def chain() -> Iterator[Frame]:
+        for st in streams:
+            yield from st
+
+    return chain(), total
+
+
+def iter_frames(
+    path: str | Path,
+    depth_topic: str | None = None,
+    labels_topic: str | None = None,
+    with_clean: bool = False,
+) -> Iterator[Frame]:
+    """Stream frames (labels where present; the simulator's scene, and its clean depth if asked).
+
+    `open_frames` without the count: the same reader, the same topic detection and pairing.
+    """
+    frames, _ = open_frames(path, depth_topic, labels_topic, extras=("scene", "clean") if with_clean else ("scene",))
+    yield from frames

@@ -17,9 +17,9 @@ from typing import Any
 import torch
 
 from edge.errors import ModelError
-from edge.frames import atomic_write
+from edge.io import atomic_write
 from edge.meta import ModelMeta
-from edge.model import FCN8s, build_model, count_parameters
+from edge.train.model import FCN8s, build_model, count_parameters
 
 __all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "CHECKPOINT_FORMAT"]
 

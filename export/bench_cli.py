@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.cliutil import print_json, progress, run
-from edge.errors import ConfigError, ModelError
+from edge.errors import ConfigError
 
 PROG = "depthseg-bench"
 
@@ -43,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--compare", action="append", default=[], metavar="ENCODER[:WIDTH]",
                    help="also time this architecture with random weights, 3 channels, fp32 (e.g. vgg16 = the paper's "
-                        "FCN-8s; width 1 unless given); exported to a temp file in a subprocess; repeatable")
+                        "FCN-8s; width 1 unless given); exported in-process to a temp file; repeatable")
     p.add_argument("--runs", type=int, default=200, help="timed runs per model (default 200)")
     p.add_argument("--warmup", type=int, default=20, help="untimed runs per model first (default 20)")
     p.add_argument("--data", type=Path, default=None, help="simulated MCAP file or directory to take frames from")
@@ -111,28 +111,15 @@ def format_report(res: dict[str, Any]) -> str:
 
 
 def benchmark(args: argparse.Namespace) -> dict[str, Any]:
-    from edge.bench import (
-        ModelSpec,
-        bench_models,
-        cpu_info,
-        export_random_model,
-        peak_rss_mb,
-        runtime_info,
-        time_torch,
-    )
-    from edge.defaults import DEFAULT_ONNX
+    from edge.bench import ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
+    from edge.defaults import resolve_model
     from edge.sampleframes import sample_frames
 
     if args.threads < 1:
         raise ConfigError(f"--threads must be >= 1, got {args.threads}")
     if args.frames < 1:
         raise ConfigError(f"--frames must be >= 1, got {args.frames}")
-    if not args.model and not DEFAULT_ONNX.exists():
-        raise ModelError(
-            f"{DEFAULT_ONNX}: the shipped default model is missing; pass --model M.onnx, or export it: "
-            "depthseg-export --single-channel --out edge/models/default.onnx"
-        )
-    paths = args.model or [DEFAULT_ONNX]
+    paths = args.model or [resolve_model(None, kinds=("onnx",))]
     specs = [ModelSpec(p, threads=args.threads) for p in paths]
     frames = sample_frames(args.data, args.frames, args.seed)
     with tempfile.TemporaryDirectory(prefix="depthseg-bench-") as td:
@@ -143,7 +130,10 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
             except ValueError:
                 raise ConfigError(f"--compare {item}: width must be a number, e.g. vgg16:0.5") from None
             out = Path(td) / f"compare-{enc}-w{width:g}.onnx"
-            export_random_model(enc, out, width=width, threads=args.threads)
+            # in-process (torch is imported only for --compare/--torch); models are timed after it
+            from export.api import export_random
+
+            export_random(enc, out, width=width, threads=args.threads)
             specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=args.threads))
         bar = progress(total=args.runs, desc="bench")
         try:
@@ -153,6 +143,7 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
             bar.close()
         if args.torch:
             from edge.infer import Segmenter
+            from edge.train.timing import time_torch
 
             segs = [Segmenter(spec.path, threads=args.threads) for spec in specs]
             for m, t in zip(models, time_torch(segs, frames.depth, runs=min(args.runs, 50), warmup=max(3, min(args.warmup, 10)))):
@@ -172,7 +163,8 @@ def benchmark(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
 
     def body() -> int:
         res = benchmark(args)
@@ -182,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_report(res))
         return 0
 
-    return run(PROG, body)
+    return run(PROG, body, parser)
 
 
 if __name__ == "__main__":

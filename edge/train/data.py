@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from edge.errors import DataError
-from edge.frames import iter_frames
+from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import preprocess_for
 
@@ -33,14 +33,39 @@ class FrameSet:
         return FrameSet(self.depth[idx], self.label[idx])
 
 
-def load_frames(paths: list[str | Path], limit: int | None = None, progress=None) -> FrameSet:
-    """All labelled frames of one size from MCAP files/directories (unlabelled frames refused)."""
+def load_frames(
+    paths: list[str | Path],
+    limit: int | None = None,
+    progress=None,
+    depth_topic: str | None = None,
+    labels_topic: str | None = None,
+) -> FrameSet:
+    """All labelled frames of one size from MCAP files/directories (unlabelled frames refused).
+
+    Reads through `edge.io.open_frames`, the reader eval and tune use: topics detected (or
+    named), labels paired with depth by header stamp within a tolerance, so every recording
+    that ``depthseg-eval`` accepts also trains.
+
+    Args:
+        paths: .mcap files or directories of them.
+        limit: stop after this many frames.
+        progress: a tqdm-like object whose ``update(1)`` is called per frame.
+        depth_topic: the depth Image topic (None: detected).
+        labels_topic: the label Image topic (None: detected).
+
+    Raises:
+        DataError: a path has no labels, a frame has none, or frame sizes differ.
+    """
     depths: list[np.ndarray] = []
     labels: list[np.ndarray] = []
     for path in paths:
-        for fr in iter_frames(path):
+        frames, _ = open_frames(path, depth_topic, labels_topic, require_labels=True)
+        for fr in frames:
             if fr.label is None:
-                raise DataError(f"{path}: frame at {fr.stamp_ns} ns has no label; training needs /pico_flexx/labels")
+                raise DataError(
+                    f"{path}: depth frame at log time {fr.stamp_ns} ns has no label within "
+                    f"{DEFAULT_TOLERANCE_NS / 1e6:g} ms of its stamp; training needs every frame labelled"
+                )
             if depths and fr.depth.shape != depths[0].shape:
                 raise DataError(f"{path}: frames of different sizes {fr.depth.shape} vs {depths[0].shape}")
             depths.append(np.nan_to_num(fr.depth, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32))

@@ -6,7 +6,7 @@ tuned model carries its boundary wherever it is copied; no flag to forget.
 - ONNX: ``metadata_props`` are rewritten with the ``onnx`` package: the full `ModelMeta` JSON
   under ``depthseg`` plus the flat keys from `ModelMeta.onnx_props` (``threshold``,
   ``threshold_policy``, ...). Other keys (e.g. quantisation notes from export) are kept.
-- Checkpoint (``.pt``/``.pth``): ``blob["meta"]`` is updated through `edge.checkpoint`; torch is
+- Checkpoint (``.pt``/``.pth``): ``blob["meta"]`` is updated through `edge.train.checkpoint`; torch is
   imported only for this branch.
 
 Without ``out`` the model is rewritten in place after copying it to ``<model>.bak``; every
@@ -19,7 +19,7 @@ import shutil
 from pathlib import Path
 
 from edge.errors import ModelError
-from edge.frames import atomic_write
+from edge.io import atomic_write
 from edge.meta import META_KEY, ModelMeta
 
 __all__ = ["store_threshold", "read_meta", "backup_path"]
@@ -58,7 +58,7 @@ def read_meta(path: str | Path) -> ModelMeta:
     if _kind(p) == "onnx":
         model = _load_onnx(p)
         return ModelMeta.from_onnx_props({e.key: e.value for e in model.metadata_props})
-    from edge.checkpoint import read_checkpoint
+    from edge.train.checkpoint import read_checkpoint
 
     return ModelMeta.from_dict(read_checkpoint(p)["meta"])
 
@@ -85,7 +85,7 @@ def _write_onnx(src: Path, dst: Path, threshold: float, policy: str) -> ModelMet
 def _write_checkpoint(src: Path, dst: Path, threshold: float, policy: str) -> ModelMeta:
     import torch
 
-    from edge.checkpoint import read_checkpoint
+    from edge.train.checkpoint import read_checkpoint
 
     blob = read_checkpoint(src)
     meta = ModelMeta.from_dict(blob["meta"]).with_(threshold=float(threshold), threshold_policy=policy)
@@ -117,11 +117,11 @@ def store_threshold(
     dst = Path(out) if out is not None else src
     if out is not None:
         if dst.is_dir():
-            raise ModelError(f"--out {dst}: is a directory, expected a model file name")
+            raise ModelError(f"`out` {dst}: is a directory, expected a model file name")
         if _kind(dst) != kind:
-            raise ModelError(f"--out {dst}: must have the model's type ({src.suffix}), got '{dst.suffix}'")
+            raise ModelError(f"`out` {dst}: must have the model's type ({src.suffix}), got '{dst.suffix}'")
         if not dst.parent.exists():
-            raise ModelError(f"--out {dst}: directory {dst.parent} does not exist")
+            raise ModelError(f"`out` {dst}: directory {dst.parent} does not exist")
     backup = None
     if dst.resolve() == src.resolve():
         backup = backup_path(src)

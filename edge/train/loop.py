@@ -25,12 +25,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from edge.checkpoint import read_checkpoint, save_checkpoint
-from edge.data import FrameSet, make_batch
 from edge.errors import ConfigError, ModelError
-from edge.frames import atomic_write, write_bytes_atomic
+from edge.io import atomic_write, write_bytes_atomic
 from edge.meta import ModelMeta
-from edge.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
+from edge.train.checkpoint import read_checkpoint, save_checkpoint
+from edge.train.data import FrameSet, make_batch
+from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
 __all__ = ["TrainConfig", "TrainResult", "train", "masked_bce", "plot_losses"]
 
@@ -162,25 +162,28 @@ def train(
 
     history: list[dict[str, Any]] = []
     batch_losses: list[float] = []
-    start_epoch, best_loss, best_epoch, elapsed_before = 0, float("inf"), -1, 0.0
+    # Epochs are numbered from 1 everywhere they are shown or stored (console, log.csv, checkpoint,
+    # metadata): "epoch 3" is the third pass over the data. best_epoch 0 = none yet.
+    start_epoch, best_loss, best_epoch, elapsed_before = 0, float("inf"), 0, 0.0
     last = out / "last.pt"
     if resume:
         if not last.exists():
-            raise ModelError(f"{last}: nothing to resume; start without --resume")
+            raise ModelError(f"{last}: nothing to resume; start without `resume`")
         blob = read_checkpoint(last)
         saved = ModelMeta.from_dict(blob["meta"])
         for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip", "standardize", "cues"):
             if getattr(saved, k) != getattr(meta, k):
                 raise ConfigError(
-                    f"--resume: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"
+                    f"`resume`: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"
                 )
         model.load_state_dict(blob["state_dict"])
         opt.load_state_dict(blob["optimizer"])
-        start_epoch = int(blob["epoch"]) + 1
+        old = blob.get("epoch_base") != 1  # checkpoints before epochs were numbered from 1
+        start_epoch = int(blob["epoch"]) + (1 if old else 0)  # 0-based index of the next epoch
         history = list(blob.get("history", []))
         batch_losses = list(blob.get("batch_losses", []))
         best_loss = float(blob.get("best_val_loss") or float("inf"))
-        best_epoch = int(blob.get("best_epoch", -1))
+        best_epoch = int(blob.get("best_epoch", -1)) + (1 if old else 0)
         elapsed_before = float(blob.get("minutes", 0.0))
 
     def lr_at(epoch: int) -> float:
@@ -190,14 +193,16 @@ def train(
 
     t0 = time.time()
     info = dict(training_info or {})
-    epoch = start_epoch - 1
-    for epoch in range(start_epoch, cfg.epochs):
-        if best_epoch >= 0 and epoch - best_epoch > cfg.patience:
+    epoch = start_epoch  # 1-based number of the last epoch run
+    for i in range(start_epoch, cfg.epochs):  # i: 0-based index (schedule and shuffling seed)
+        epoch = i + 1
+        if best_epoch > 0 and epoch - best_epoch > cfg.patience:
+            epoch -= 1
             break
         te = time.time()
         for g in opt.param_groups:
-            g["lr"] = lr_at(epoch)
-        rng = np.random.default_rng([cfg.seed, epoch])
+            g["lr"] = lr_at(i)
+        rng = np.random.default_rng([cfg.seed, i])
         order = rng.permutation(len(train_set))
         model.train()
         run_loss = 0.0
@@ -222,7 +227,7 @@ def train(
             "train_loss": run_loss / steps_per_epoch,
             "val_loss": val_loss,
             "val_iou": val_iou,
-            "lr": lr_at(epoch),
+            "lr": lr_at(i),
             "epoch_seconds": round(time.time() - te, 1),
             "minutes": round(minutes, 2),
         }
@@ -231,19 +236,20 @@ def train(
         if improved:
             best_loss, best_epoch = val_loss, epoch
         rec = dict(info, config=asdict(cfg), best_epoch=best_epoch, best_val_loss=best_loss,
-                   epochs_run=epoch + 1, minutes=round(minutes, 2), train_frames=len(train_set),
+                   epochs_run=epoch, minutes=round(minutes, 2), train_frames=len(train_set),
                    val_frames=len(val_set), trainable_params=count_parameters(model, trainable_only=True))
         m_meta = meta.with_(training=rec)
         if improved:
-            save_checkpoint(out / "best.pt", model, m_meta, epoch=epoch, best_val_loss=best_loss, history=history)
-        save_checkpoint(last, model, m_meta, epoch=epoch, best_val_loss=best_loss, best_epoch=best_epoch,
+            save_checkpoint(out / "best.pt", model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss,
+                            history=history)
+        save_checkpoint(last, model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss, best_epoch=best_epoch,
                         history=history, optimizer=opt.state_dict(), batch_losses=batch_losses, minutes=minutes)
         _write_csv(out / "log.csv", history)
         plot_losses(history, batch_losses, out / "loss.png")
         if on_epoch:
             on_epoch(row)
         if cfg.max_minutes is not None:
-            per_epoch = (time.time() - t0) / 60 / (epoch - start_epoch + 1)
+            per_epoch = (time.time() - t0) / 60 / (epoch - start_epoch)
             if minutes + per_epoch > cfg.max_minutes:
                 break
     # the final best.pt carries the complete history and the final recipe facts
@@ -251,10 +257,10 @@ def train(
     if best.exists():
         blob = read_checkpoint(best)
         bm = ModelMeta.from_dict(blob["meta"])
-        rec = dict(bm.training, epochs_run=epoch + 1, minutes=round(elapsed_before + (time.time() - t0) / 60, 2))
+        rec = dict(bm.training, epochs_run=epoch, minutes=round(elapsed_before + (time.time() - t0) / 60, 2))
         model_b = build_model(bm)
         model_b.load_state_dict(blob["state_dict"])
-        save_checkpoint(best, model_b, bm.with_(training=rec), epoch=blob["epoch"], best_val_loss=best_loss,
-                        history=history)
-    return TrainResult(best_epoch, best_loss, epoch + 1, history,
+        save_checkpoint(best, model_b, bm.with_(training=rec), epoch=blob["epoch"], epoch_base=1,
+                        best_val_loss=best_loss, history=history)
+    return TrainResult(best_epoch, best_loss, epoch, history,
                        elapsed_before + (time.time() - t0) / 60, best if best.exists() else None)

@@ -12,9 +12,9 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from edge.encoders import create_encoder, scaled
 from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
+from edge.train.encoders import create_encoder, scaled
 
 __all__ = ["FCN8s", "build_model", "count_parameters", "load_vgg_weights", "freeze_encoder"]
 
@@ -97,6 +97,6 @@ def load_vgg_weights(model: FCN8s, path: str) -> None:
     if bad or missing:
         raise ModelError(
             f"{path}: does not fit this encoder (shape mismatches {dict(list(bad.items())[:3])}, "
-            f"missing {missing[:3]}); use --width 1.0 and the matching VGG depth/batch-norm variant"
+            f"missing {missing[:3]}); use `width` 1.0 and the matching VGG depth/batch-norm variant"
         )
     model.encoder.features.load_state_dict(feats, strict=True)

@@ -1,0 +1,49 @@
+"""Depth frames in and out of MCAP: the layout ``depthseg-sim`` writes and every tool reads.
+
+Layout (one message of each per frame, all with the frame's timestamp as log time):
+- ``/pico_flexx/image_depth``  sensor_msgs/msg/Image 32FC1, metres (Z), 0 = invalid
+- ``/pico_flexx/labels``       sensor_msgs/msg/Image mono8, 1 = object, 0 = background
+- ``/pico_flexx/camera_info``  sensor_msgs/msg/CameraInfo
+- ``/depthseg/clean_depth``    sensor_msgs/msg/Image 32FC1, noise-free Z (simulated data only)
+- ``/depthseg/scene``          JSON: frame index, seed and scene parameters (regenerate from it)
+
+`edge.io.reader` reads it (and any other ROS 2 / Foxglove recording), `edge.io.writer` writes it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "TOPIC_DEPTH",
+    "TOPIC_LABELS",
+    "TOPIC_INFO",
+    "TOPIC_CLEAN",
+    "TOPIC_SCENE",
+    "FRAME_ID",
+    "Frame",
+]
+
+TOPIC_DEPTH = "/pico_flexx/image_depth"
+TOPIC_LABELS = "/pico_flexx/labels"
+TOPIC_INFO = "/pico_flexx/camera_info"
+TOPIC_CLEAN = "/depthseg/clean_depth"
+TOPIC_SCENE = "/depthseg/scene"
+FRAME_ID = "pico_flexx_optical_frame"
+
+
+@dataclass
+class Frame:
+    """One depth frame and what came with it."""
+
+    depth: np.ndarray  # float32 H x W, metres; invalid may be 0, NaN, negative or inf
+    stamp_ns: int
+    label: np.ndarray | None = None  # uint8 H x W, 1 = object
+    clean: np.ndarray | None = None  # float32 H x W, noise-free depth (simulation only)
+    info: dict[str, Any] | None = None  # CameraInfo fields (fx, fy, cx, cy, d, ...)
+    scene: dict[str, Any] | None = None
+    topic: str = TOPIC_DEPTH
+    extra: dict[str, Any] = field(default_factory=dict)
