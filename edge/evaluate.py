@@ -42,6 +42,7 @@ from edge.metrics import (
     boundary_band,
     confusion,
     frame_scores,
+    predict_mask,
     threshold_logit,
 )
 from edge.preprocess import standardize, valid_mask
@@ -234,7 +235,7 @@ def evaluate(
     meta = getattr(predictor, "meta", None)
     if threshold is None:
         threshold = float(meta.threshold) if meta is not None else 0.5
-    tl = threshold_logit(threshold)
+    threshold_logit(threshold)  # checks it lies in (0, 1) before any frame is run
     if figure_pick not in FIGURE_PICKS:
         raise ConfigError(f"unknown figure pick '{figure_pick}'; choose from {', '.join(FIGURE_PICKS)}")
     if max_figures < 0:
@@ -272,7 +273,7 @@ def evaluate(
         logits = predictor.logits(depth)
         if logits.shape != depth.shape:
             raise ModelError(f"{predictor.name}: returned logits of shape {logits.shape} for a {depth.shape} frame")
-        pred = logits >= tl
+        pred = predict_mask(logits, threshold)
         outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
         s = acc.add(pred, label, valid, outside_void)
         bpred = None

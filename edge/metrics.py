@@ -86,7 +86,7 @@ def sigmoid(x: np.ndarray | float) -> np.ndarray | float:
     a = np.asarray(x)
     if a.dtype != np.float32:
         a = a.astype(np.float64)
-    p = np.clip(a, -_LOGIT_CLIP, _LOGIT_CLIP)
+    p = np.array(np.clip(a, -_LOGIT_CLIP, _LOGIT_CLIP), dtype=a.dtype)  # a new array, even for a scalar
     np.negative(p, out=p)
     np.exp(p, out=p)
     p += 1.0
@@ -140,8 +140,21 @@ def threshold_logit(threshold: float) -> float:
 
 
 def predict_mask(logits: np.ndarray, threshold: float = 0.5) -> np.ndarray:
-    """Boolean object mask: sigmoid(logits) >= threshold, evaluated as logits >= logit(threshold)."""
-    return np.asarray(logits) >= threshold_logit(threshold)
+    """Boolean object mask: sigmoid(logits) >= threshold, evaluated as logits >= logit(threshold).
+
+    The comparison is exact: float32 logits are compared with the smallest float32 not below the
+    float64 logit(threshold), which decides every pixel as a float64 comparison would (NumPy would
+    otherwise round the threshold to float32 and move pixels within one ulp of it), and as
+    `edge.tune` does with its float64 grid.
+    """
+    t = threshold_logit(threshold)
+    x = np.asarray(logits)
+    if x.dtype == np.float32:
+        c = np.float32(t)
+        if float(c) < t:  # float(): NumPy would compare in float32 and never see the difference
+            c = np.nextafter(c, np.float32(np.inf))
+        return x >= c
+    return x >= t
 
 
 def segmentation_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5) -> np.ndarray:

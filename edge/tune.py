@@ -49,7 +49,7 @@ import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
 from edge.io import Frame, atomic_write
-from edge.metrics import threshold_logit
+from edge.metrics import sigmoid, threshold_logit
 from edge.preprocess import valid_mask
 
 __all__ = [
@@ -78,17 +78,6 @@ GRID_SCALE = 0.05  # logits ~ this size get an evenly spaced grid; larger ones a
 OBJECTIVE_FORMS = "iou, f1, fBETA (e.g. f0.5, f2), precision>=P, recall>=R (P, R fractions, e.g. 0.98)"
 
 _TIE_TOL = 1e-12
-
-
-def sigmoid(x: np.ndarray | float) -> np.ndarray | float:
-    """Overflow-free logistic function, float64."""
-    x = np.asarray(x, dtype=np.float64)
-    out = np.empty_like(x)
-    pos = x >= 0
-    out[pos] = 1.0 / (1.0 + np.exp(-x[pos]))
-    e = np.exp(x[~pos])
-    out[~pos] = e / (1.0 + e)
-    return out if out.ndim else float(out)
 
 
 def logit_grid(

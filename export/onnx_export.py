@@ -29,7 +29,7 @@ from edge.errors import ModelError
 from edge.infer import INPUT_NAME, OUTPUT_LOGITS
 from edge.io import atomic_path, atomic_write
 from edge.meta import ModelMeta
-from edge.metrics import threshold_logit
+from edge.metrics import predict_mask
 from edge.preprocess import padded_shape, preprocess, preprocess_for
 from edge.train.model import FCN8s
 
@@ -199,7 +199,6 @@ def check_against_torch(
     from edge.infer import Segmenter
 
     seg = Segmenter(onnx_path, threads=threads)
-    thr_logit = threshold_logit(seg.threshold)
     diffs, scale, flips, n_valid = [], 0.0, 0, 0
     refs = []
     for d in frames:
@@ -208,7 +207,7 @@ def check_against_torch(
         valid = preprocess(d, 1, meta.pad_multiple).valid
         diffs.append(float(np.max(np.abs(got - ref))))
         scale = max(scale, float(np.max(np.abs(ref))))
-        flips += int(np.count_nonzero(((got >= thr_logit) != (ref >= thr_logit)) & valid))
+        flips += int(np.count_nonzero((predict_mask(got, seg.threshold) != predict_mask(ref, seg.threshold)) & valid))
         n_valid += int(valid.sum())
         refs.append(ref)
     batch = seg.logits_batch(frames)

@@ -26,14 +26,13 @@ def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: in
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     import torch
 
-    from edge.metrics import UNKNOWN, threshold_logit
+    from edge.metrics import segmentation_mask
     from edge.preprocess import preprocess_for
     from edge.train.model import build_model
 
     def runner(seg: Segmenter):
         m = seg.meta
         model = build_model(m).eval()
-        thr_logit = threshold_logit(seg.threshold)
 
         def whole(d: np.ndarray) -> tuple[float, float]:
             torch.set_num_threads(seg.threads)
@@ -44,8 +43,7 @@ def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: in
                 out = model(torch.from_numpy(pre.x[None])).numpy()
             t2 = time.perf_counter()
             h, w = pre.shape
-            mask = (out[0, 0, :h, :w] >= thr_logit).astype(np.uint8)
-            mask[~pre.valid] = UNKNOWN
+            segmentation_mask(out[0, 0, :h, :w], pre.valid, seg.threshold)
             t3 = time.perf_counter()
             return (t2 - t1) * 1e3, (t3 - t0) * 1e3
 

@@ -329,17 +329,6 @@ def test_onnx_model_scores_like_its_checkpoint(tiny_ckpt, data, tmp_path, capsys
     ref = evaluate(b, iter_frames(data)).to_dict()
     for k in ("frames", "threshold", "pixel_accuracy", "iou", "precision", "recall", "pooled_iou"):
         assert got[k] == pytest.approx(ref[k], abs=1e-3), k
-    # evaluating an ONNX model (with the baseline) never loads torch
-    import subprocess
-    import sys
-
-    code = (
-        "import sys; from edge.eval_cli import main; "
-        f"rc = main(['--model', {str(onnx_path)!r}, '--data', {str(data)!r}, '--json', '--baseline', '--limit', '1']); "
-        "assert rc == 0; assert 'torch' not in sys.modules, 'torch was imported'"
-    )
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr[-2000:]
 
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository

@@ -13,10 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import TINY_H as H
+from conftest import TINY_SENSOR as SMALL
+from conftest import TINY_W as W
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
 from edge.io import FrameWriter
-from edge.meta import ModelMeta, SensorSpec, fov_intrinsics
+from edge.meta import ModelMeta
 from edge.metrics import MetricAccumulator
 from edge.tune import (
     LOGIT_LIMIT,
@@ -29,9 +32,7 @@ from edge.tune import (
     tune,
 )
 
-H, W = 48, 64
-_FX, _FY, _CX, _CY = fov_intrinsics(W, H, 62.0, 45.0)
-SMALL = SensorSpec(width=W, height=H, fx=_FX, fy=_FY, cx=_CX, cy=_CY)
+_FX, _FY, _CX, _CY = SMALL.fx, SMALL.fy, SMALL.cx, SMALL.cy
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -298,32 +299,10 @@ def data_dir(tmp_path_factory) -> Path:
     return d
 
 
-@pytest.fixture(scope="module")
-def tiny_pt(tmp_path_factory) -> Path:
-    import torch
-
-    from edge.train.checkpoint import save_checkpoint
-    from edge.train.model import build_model
-
-    torch.manual_seed(0)
-    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, sensor=SMALL)
-    model = build_model(meta).eval()
-    return save_checkpoint(tmp_path_factory.mktemp("tune_model") / "tiny.pt", model, meta)
-
-
 def _export(pt: Path, out: Path) -> Path:
-    from edge.train.checkpoint import load_checkpoint
-    from export.onnx_export import export_onnx
-    from export.single_channel import to_single_channel
+    from conftest import export_checkpoint
 
-    model, meta, _ = load_checkpoint(pt)
-    m1, meta1 = to_single_channel(model, meta)
-    return export_onnx(m1, meta1, out)
-
-
-@pytest.fixture(scope="module")
-def tiny_onnx(tiny_pt, tmp_path_factory) -> Path:
-    return _export(tiny_pt, tmp_path_factory.mktemp("tune_onnx") / "tiny.onnx")
+    return export_checkpoint(pt, out)
 
 
 def _cli(capsys, *argv: str) -> tuple[int, str, str]:
@@ -500,16 +479,3 @@ def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
 
     assert ModelMeta.from_dict(read_checkpoint(str(pt) + ".bak")["meta"]).threshold == 0.5
 
-
-def test_tuning_an_onnx_model_never_imports_torch(data_dir, tiny_onnx, tmp_path):
-    import subprocess
-    import sys
-
-    code = (
-        "import sys\nfrom edge.tune_cli import main\n"
-        f"rc = main(['--model', {str(tiny_onnx)!r}, '--data', {str(data_dir / 'labelled.mcap')!r}, '--dry-run', '--json'])\n"
-        "print(rc, 'torch' in sys.modules)\n"
-    )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip().splitlines()[-1] == "0 False"

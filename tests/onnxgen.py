@@ -1,9 +1,9 @@
-"""Hand-built ONNX models with depthseg metadata for the Segmenter and bench tests.
+"""The hand-built ONNX models with depthseg metadata (Segmenter, bench, eval, tune and replay tests).
 
 Built with onnx.helper (no torch), so these tests run on the edge path alone and fast; the
 real exported FCN-8s is covered in tests/export.
-- `linear_model`: logits = -K * standardised depth (nearer than the frame mean = object), the
-  same [N, C, H, W] -> [N, 1, H, W] contract as an exported model.
+- `linear_model`: logits = -K * standardised depth + B (nearer than the frame mean = object),
+  the same [N, C, H, W] -> [N, 1, H, W] contract as an exported model.
 - `raw_model`: the --with-preprocessing contract: raw depth [N, H, W] -> probability, valid.
 """
 
@@ -41,17 +41,18 @@ def _save(graph, meta: ModelMeta, path: Path, extra: dict[str, str] | None = Non
 
 
 def linear_model(path: Path, channels: int = 1, threshold: float = 0.5, k: float = 4.0,
-                 meta_channels: int | None = None, with_meta: bool = True) -> Path:
+                 meta_channels: int | None = None, with_meta: bool = True, bias: float = 0.0) -> Path:
     import onnx
     from onnx import TensorProto, helper, numpy_helper
 
     meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=meta_channels or channels,
                      threshold=threshold, training={"weights": "hand-built linear test model"})
     w = numpy_helper.from_array(np.full((1, channels, 1, 1), -k / channels, np.float32), "W")
+    b = numpy_helper.from_array(np.array([bias], np.float32), "B")
     g = helper.make_graph(
-        [helper.make_node("Conv", ["depth", "W"], ["logits"])], "linear",
+        [helper.make_node("Conv", ["depth", "W", "B"], ["logits"])], "linear",
         [helper.make_tensor_value_info("depth", TensorProto.FLOAT, ["N", channels, "H", "W"])],
-        [helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["N", 1, "H", "W"])], [w],
+        [helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["N", 1, "H", "W"])], [w, b],
     )
     if not with_meta:
         m = helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)])

@@ -291,30 +291,3 @@ class FakeSegmenter:
             prob = 1.0 - prob
         mask = np.where(valid, (prob >= self.threshold).astype(np.uint8), np.uint8(255)).astype(np.uint8)
         return SimpleNamespace(prob=prob, mask=mask, valid=valid, timings={"total": 0.0})
-
-
-def make_linear_onnx(path: Path) -> Path:
-    """A real ONNX file with depthseg metadata: logits = -40 * standardised depth - 20 (nearer = object).
-
-    Built with onnx.helper, so edge.infer.Segmenter and onnxruntime run for real without torch.
-    """
-    import onnx
-    from onnx import TensorProto, helper, numpy_helper
-
-    from edge.meta import ModelMeta
-
-    meta = ModelMeta(encoder="vgg11", width=0.125, in_channels=1, batch_norm=True)
-    W = numpy_helper.from_array(np.array([[[[-40.0]]]], dtype=np.float32), "W")
-    B = numpy_helper.from_array(np.array([-20.0], dtype=np.float32), "B")
-    g = helper.make_graph(
-        [helper.make_node("Conv", ["depth", "W", "B"], ["logits"])], "linear",
-        [helper.make_tensor_value_info("depth", TensorProto.FLOAT, ["N", 1, "H", "W"])],
-        [helper.make_tensor_value_info("logits", TensorProto.FLOAT, ["N", 1, "H", "W"])], [W, B],
-    )
-    m = helper.make_model(g, opset_imports=[helper.make_opsetid("", 17)])
-    m.ir_version = 9
-    for k, v in meta.onnx_props().items():
-        e = m.metadata_props.add()
-        e.key, e.value = k, v
-    onnx.save(m, str(path))
-    return path
