@@ -20,7 +20,7 @@ from mcap.writer import CompressionType, Writer
 from edge import rosmsg
 from edge.preprocess import valid_mask
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 T0 = 1_700_000_000_000_000_000
 PERIOD = 50_000_000  # 20 fps
 KINDS = ("ros32_zero", "ros32_nan", "ros16", "fox_proto", "fox_json")

@@ -82,26 +82,6 @@ MessageHook = Callable[[Schema | None, Channel, Message], None]
 
 
 @dataclass
-class _Img:
-    """An image message of any source, before its pixels are trusted."""
-
-    stamp_ns: int
-    frame_id: str
-    height: int
-    width: int
-    encoding: str
-    is_bigendian: int
-    step: int
-    data: Any  # bytes-like
-
-    def as_ros(self) -> rosmsg.RosImage:
-        return rosmsg.RosImage(
-            self.stamp_ns, self.frame_id, self.height, self.width, self.encoding,
-            self.is_bigendian, self.step, memoryview(self.data),
-        )
-
-
-@dataclass
 class _TopicInfo:
     topic: str
     schema_name: str
@@ -235,21 +215,20 @@ def _walk(
 # ---------------------------------------------------------------------------- decoders
 
 
-def _ros_image(data: bytes, what: str) -> _Img:
-    m = rosmsg.decode_image(data, what=what)
-    return _Img(m.stamp_ns, m.frame_id, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
+def _ros_image(data: bytes, what: str) -> rosmsg.RosImage:
+    return rosmsg.decode_image(data, what=what)
 
 
-def _json_image(data: bytes, what: str) -> _Img:
+def _json_image(data: bytes, what: str) -> rosmsg.RosImage:
     try:
         d = json.loads(bytes(data))
         ts = d.get("timestamp") or {}
         sec = int(ts.get("sec", 0))
         nsec = int(ts.get("nsec", ts.get("nanosec", 0)))
         raw = base64.b64decode(d["data"], validate=True)
-        return _Img(
+        return rosmsg.RosImage(
             sec * 1_000_000_000 + nsec, str(d.get("frame_id", "")), int(d["height"]), int(d["width"]),
-            str(d["encoding"]), 0, int(d["step"]), raw,
+            str(d["encoding"]), 0, int(d["step"]), memoryview(raw),
         )
     except (ValueError, KeyError, TypeError, AttributeError, binascii.Error) as exc:
         raise McapDataError(f"{what}: not a foxglove RawImage JSON message ({type(exc).__name__}: {exc})") from None
@@ -270,13 +249,13 @@ def _protobuf_class(schema: Schema, topic: str):
     return dec
 
 
-def _protobuf_image(decode, data: bytes, what: str) -> _Img:
+def _protobuf_image(decode, data: bytes, what: str) -> rosmsg.RosImage:
     try:
         m = decode(data)
         ts = m.timestamp
-        return _Img(
+        return rosmsg.RosImage(
             int(ts.seconds) * 1_000_000_000 + int(ts.nanos), m.frame_id, int(m.height), int(m.width),
-            m.encoding, 0, int(m.step), m.data,
+            m.encoding, 0, int(m.step), memoryview(m.data),
         )
     except DepthsegError:
         raise
@@ -304,7 +283,7 @@ def _camera_info(decode_obj, data: bytes, what: str) -> dict[str, Any]:
 
 
 class _ChannelDecoder:
-    """Turns the raw bytes of one channel into an `_Img` (or CameraInfo dict); built once per channel."""
+    """Turns the raw bytes of one channel into a `rosmsg.RosImage` (or CameraInfo dict); built once per channel."""
 
     def __init__(self, schema: Schema | None, channel: Channel) -> None:
         self.topic = channel.topic
@@ -329,7 +308,7 @@ class _ChannelDecoder:
                 "depth must be sensor_msgs/msg/Image or foxglove.RawImage"
             )
 
-    def image(self, data: bytes, what: str) -> _Img:
+    def image(self, data: bytes, what: str) -> rosmsg.RosImage:
         if self.enc == "cdr":
             return _ros_image(data, what)
         if self.enc == "json":
@@ -342,14 +321,14 @@ class _ChannelDecoder:
         return _camera_info((self.enc, self._proto), data, what)
 
 
-def _depth_metres(img: _Img, what: str) -> np.ndarray:
+def _depth_metres(img: rosmsg.RosImage, what: str) -> np.ndarray:
     scale = DEPTH_ENCODINGS.get(img.encoding)
     if img.encoding not in rosmsg.BYTES_PER_PIXEL:
         raise McapDataError(
             f"{what}: unknown pixel encoding '{img.encoding}'; depth must be 32FC1 (metres), "
             "16UC1 (millimetres) or 64FC1 (metres)"
         )
-    arr = rosmsg.image_to_array(img.as_ros(), what=what)  # size checks before trusting pixels
+    arr = rosmsg.image_to_array(img, what=what)  # size checks before trusting pixels
     if scale is None:
         raise McapDataError(
             f"{what}: pixel encoding '{img.encoding}' is not a depth image; expected 32FC1 (metres) or "
@@ -360,12 +339,12 @@ def _depth_metres(img: _Img, what: str) -> np.ndarray:
     return arr.astype(np.float32) * np.float32(scale)
 
 
-def _label_mask(img: _Img, what: str) -> np.ndarray:
+def _label_mask(img: rosmsg.RosImage, what: str) -> np.ndarray:
     if img.encoding not in LABEL_ENCODINGS:
         raise McapDataError(
             f"{what}: label images must be mono8 (0 = background, nonzero = object), got '{img.encoding}'"
         )
-    arr = rosmsg.image_to_array(img.as_ros(), what=what)
+    arr = rosmsg.image_to_array(img, what=what)
     return (arr > 0).astype(np.uint8)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -115,3 +116,26 @@ def test_compare_adds_a_random_init_architecture(models, capsys):
     a, b = res["models"]
     assert b["name"].startswith("vgg11_bn w0.125") and b["weights"] == "random-init" and b["in_channels"] == 3
     assert b["ratio_to_first"] == pytest.approx(b["whole_frame_p50_ms"] / a["whole_frame_p50_ms"])
+
+
+def test_compare_exports_in_process_and_adds_the_model(models, tiny_onnx, monkeypatch, capsys):
+    """The --compare plumbing (the real export of a random-init architecture is the slow test above)."""
+    import shutil
+
+    import export.api
+
+    calls = []
+
+    def fake_export(encoder, out, width=1.0, **kw):
+        calls.append((encoder, width))
+        return Path(shutil.copy(tiny_onnx, out))
+
+    monkeypatch.setattr(export.api, "export_random", fake_export)
+    rc = main(["--model", str(models[0]), "--compare", "vgg13:0.25", "--threads", "1", "--runs", "2",
+               "--warmup", "1", "--json"])
+    assert rc == 0, capsys.readouterr().err
+    a, b = json.loads(capsys.readouterr().out)["models"]
+    assert calls == [("vgg13", 0.25)] and b["name"].startswith("vgg13 w0.25")
+    assert b["ratio_to_first"] == pytest.approx(b["whole_frame_p50_ms"] / a["whole_frame_p50_ms"])
+    assert main(["--model", str(models[0]), "--compare", "vgg13:x"]) == 2
+    assert "--compare" in capsys.readouterr().err

@@ -311,16 +311,13 @@ def test_cli_users_recording_auto_and_named_topics(tiny_ckpt, tmp_path, capsys):
     assert rc == 0 and json.loads(capsys.readouterr().out)["frames"] == 3
 
 
-@pytest.mark.slow
-def test_onnx_model_scores_like_its_checkpoint(tiny_ckpt, data, tmp_path, capsys):
+def test_onnx_model_scores_like_its_checkpoint(tiny_pt, tiny_onnx, data, capsys):
     """The same weights as .pt (torch) and .onnx (onnxruntime, edge path) give the same table."""
-    onnx_export = pytest.importorskip("export.onnx_export")
-    from edge.train.checkpoint import load_checkpoint
-
-    model, meta, _ = load_checkpoint(tiny_ckpt)
-    onnx_path = onnx_export.export_onnx(model, meta, tmp_path / "tiny.onnx")
-    a, b = load_predictor(onnx_path, threads=1), load_predictor(tiny_ckpt, threads=1)
-    assert type(a).__name__ == "Segmenter" and a.meta == b.meta
+    onnx_path = tiny_onnx
+    a, b = load_predictor(onnx_path, threads=1), load_predictor(tiny_pt, threads=1)
+    assert type(a).__name__ == "Segmenter" and type(b).__name__ == "TorchPredictor"
+    for k in ("encoder", "width", "threshold", "sensor", "standardize", "cues"):
+        assert getattr(a.meta, k) == getattr(b.meta, k), k
     depth, _ = scene(2)
     assert np.abs(a.logits(depth) - b.logits(depth)).max() < 1e-4
     rc = eval_main(["--model", str(onnx_path), "--data", str(data), "--json", "--threads", "1"])

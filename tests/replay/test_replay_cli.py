@@ -146,22 +146,13 @@ def test_help_explains():
         assert needle in r.stdout, needle
 
 
-@pytest.mark.slow
-def test_exported_fcn_replays_like_depthseg_eval(tmp_path, capsys):
-    """A random-init tiny FCN-8s exported by export.onnx_export: replay and evaluation agree."""
-    pytest.importorskip("torch")
-    onnx_export = pytest.importorskip("export.onnx_export")
+def test_exported_fcn_replays_like_depthseg_eval(tmp_path, capsys, tiny_onnx):
+    """The shared tiny FCN-8s exported by export.onnx_export: replay and evaluation agree."""
     from edge.evaluate import evaluate
     from edge.io import iter_frames
-    from edge.meta import ModelMeta
     from edge.predict import load_predictor
-    from edge.train.model import build_model
 
-    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, threshold=0.5)
-    import torch
-
-    torch.manual_seed(0)
-    model_path = onnx_export.export_onnx(build_model(meta).eval(), meta, tmp_path / "tiny.onnx")
+    model_path = tiny_onnx
     rec = tmp_path / "sim.mcap"
     with FrameWriter(rec) as w:
         for i in range(4):
