@@ -55,10 +55,8 @@ def intrinsics_for(shape: tuple[int, int], info: dict[str, Any] | None = None, s
         d = tuple(float(v) for v in info.get("d") or ())
         return Intrinsics(float(info["fx"]), float(info["fy"]), float(info["cx"]), float(info["cy"]), d)
     s = sensor or SensorSpec()
-    if (s.height, s.width) == (h, w):
-        return Intrinsics(s.fx, s.fy, s.cx, s.cy, tuple(s.distortion))
-    sx, sy = w / s.width, h / s.height
-    return Intrinsics(s.fx * sx, s.fy * sy, (s.cx + 0.5) * sx - 0.5, (s.cy + 0.5) * sy - 0.5, ())
+    native = (s.height, s.width) == (h, w)
+    return Intrinsics(*s.intrinsics_for_size(h, w), tuple(s.distortion) if native else ())
 
 
 @lru_cache(maxsize=8)

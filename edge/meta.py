@@ -53,6 +53,18 @@ class SensorSpec:
     cx: float = _CX
     cy: float = _CY
     distortion: tuple[float, ...] = ()
+
+    def intrinsics_for_size(self, height: int, width: int) -> tuple[float, float, float, float]:
+        """(fx, fy, cx, cy) of this camera for a frame resized to ``height`` x ``width``.
+
+        The one rescaling rule (baseline, realism): the field of view is kept and pixel centres
+        map to pixel centres, i.e. c' = (c + 0.5) * scale - 0.5; the native size returns the
+        sensor's own values.
+        """
+        if (int(height), int(width)) == (self.height, self.width):
+            return self.fx, self.fy, self.cx, self.cy
+        sx, sy = width / self.width, height / self.height
+        return self.fx * sx, self.fy * sy, (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5
     depth: str = "z"
     min_range_m: float = 0.1
     max_range_m: float = 4.0

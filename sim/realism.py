@@ -71,11 +71,7 @@ TILE = 8
 
 
 def _default_intrinsics(shape: tuple[int, int]) -> tuple[float, float, float, float]:
-    s = SensorSpec()
-    if shape == (s.height, s.width):
-        return s.fx, s.fy, s.cx, s.cy
-    h, w = shape
-    return s.fx * w / s.width, s.fy * h / s.height, (w - 1) / 2.0, (h - 1) / 2.0
+    return SensorSpec().intrinsics_for_size(*shape)
 
 
 def corner_masks(shape: tuple[int, int]) -> dict[str, np.ndarray]:

@@ -10,6 +10,7 @@ import pytest
 
 import edge.io as fr
 from sim import cli
+from sim import dataset as sim_dataset
 
 TINY = {"scene": {"n_objects": [1, 3]}}
 
@@ -24,7 +25,7 @@ def _config(tmp_path: Path, d: dict) -> str:
 def dataset(tmp_path_factory) -> tuple[Path, dict]:
     tmp = tmp_path_factory.mktemp("sim")
     out = tmp / "out"
-    summary = cli.simulate(out, frames=5, seed=4, workers=1, shard_frames=3, config=None, show_progress=False)
+    summary = sim_dataset.simulate(out, frames=5, seed=4, workers=1, shard_frames=3, config=None, show_progress=False)
     return out, summary
 
 

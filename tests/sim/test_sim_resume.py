@@ -15,7 +15,7 @@ import pytest
 from mcap.reader import make_reader
 
 from edge.io import TOPIC_DEPTH, iter_frames
-from sim import cli
+from sim import cli, dataset
 
 FRAMES, SHARD = 30, 3
 LIGHT = {"scene": {"n_objects": [0, 6]}}  # quick frames: the test is about shards, not scenes
@@ -64,7 +64,7 @@ def test_kill_and_resume_loses_and_duplicates_nothing(tmp_path):
 
     b = tmp_path / "straight"
     cfg = cli._load_config(str(tmp_path / "light.json"))
-    cli.simulate(b, frames=FRAMES, seed=3, workers=1, shard_frames=SHARD, config=cfg, show_progress=False)
+    dataset.simulate(b, frames=FRAMES, seed=3, workers=1, shard_frames=SHARD, config=cfg, show_progress=False)
     fa, fb = _frames(a), _frames(b)
     stamps = [f.stamp_ns for f in iter_frames(a)]
     assert len(stamps) == len(set(stamps)) == FRAMES  # no duplicates, no losses
@@ -80,7 +80,7 @@ def test_resume_after_a_longer_request_replaces_the_short_last_shard(tmp_path):
     cfg = tmp_path / "c.json"
     cfg.write_text(json.dumps({"scene": {"n_objects": [0, 2]}}))
     c = cli._load_config(str(cfg))
-    cli.simulate(tmp_path / "o", frames=3, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
-    s = cli.simulate(tmp_path / "o", frames=5, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
+    dataset.simulate(tmp_path / "o", frames=3, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
+    s = dataset.simulate(tmp_path / "o", frames=5, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
     assert s["resumed_shards"] == 1 and s["removed_stale_shards"] == 1 and s["generated"] == 3
     assert [f.stamp_ns // 22_222_222 for f in iter_frames(tmp_path / "o")] == [0, 1, 2, 3, 4]
