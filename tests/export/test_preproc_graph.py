@@ -84,9 +84,9 @@ def _cue_model(seed: int = 3, **kw):
     import torch
     from torch import nn
 
-    from edge.model import build_model, count_parameters
     from edge.preprocess import preprocess_batch_for
     from edge.sampleframes import synthetic_frames
+    from edge.train.model import build_model, count_parameters
     from export.single_channel import to_single_channel
 
     meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=3, training={"purpose": "tests"}, **kw)
