@@ -1,14 +1,12 @@
-"""``depthseg-bench``: edge latency of exported models (onnxruntime, no torch)."""
+"""``depthseg-bench``: edge latency of exported models (onnxruntime, no torch); parses flags, calls `export.benchmark.benchmark`."""
 
 from __future__ import annotations
 
 import argparse
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from edge.cliutil import print_json, progress, run
-from edge.errors import ConfigError
 
 PROG = "depthseg-bench"
 
@@ -110,64 +108,20 @@ def format_report(res: dict[str, Any]) -> str:
     return "\n".join(head + ["", _fmt_table(res), ""] + tail)
 
 
-def benchmark(args: argparse.Namespace) -> dict[str, Any]:
-    from edge.bench import ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
-    from edge.defaults import resolve_model
-    from edge.sampleframes import sample_frames
-
-    if args.threads < 1:
-        raise ConfigError(f"--threads must be >= 1, got {args.threads}")
-    if args.frames < 1:
-        raise ConfigError(f"--frames must be >= 1, got {args.frames}")
-    paths = args.model or [resolve_model(None, kinds=("onnx",))]
-    specs = [ModelSpec(p, threads=args.threads) for p in paths]
-    frames = sample_frames(args.data, args.frames, args.seed)
-    with tempfile.TemporaryDirectory(prefix="depthseg-bench-") as td:
-        for item in args.compare:
-            enc, _, w = item.partition(":")
-            try:
-                width = float(w) if w else 1.0
-            except ValueError:
-                raise ConfigError(f"--compare {item}: width must be a number, e.g. vgg16:0.5") from None
-            out = Path(td) / f"compare-{enc}-w{width:g}.onnx"
-            # in-process (torch is imported only for --compare/--torch); models are timed after it
-            from export.api import export_random
-
-            export_random(enc, out, width=width, threads=args.threads)
-            specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=args.threads))
-        bar = progress(total=args.runs, desc="bench")
-        try:
-            models = bench_models(specs, frames.depth, runs=args.runs, warmup=args.warmup, spin=args.spin,
-                                  on_round=lambda _r: bar.update(1))
-        finally:
-            bar.close()
-        if args.torch:
-            from edge.infer import Segmenter
-            from edge.train.timing import time_torch
-
-            segs = [Segmenter(spec.path, threads=args.threads) for spec in specs]
-            for m, t in zip(models, time_torch(segs, frames.depth, runs=min(args.runs, 50), warmup=max(3, min(args.warmup, 10)))):
-                m.update(t)
-    return {
-        "cpu": cpu_info(),
-        "runtime": runtime_info(),
-        "threads": args.threads,
-        "inter_op_threads": 1,
-        "spin": bool(args.spin),
-        "runs": args.runs,
-        "warmup": args.warmup,
-        "frames": frames.source,
-        "peak_rss_mb": peak_rss_mb(),
-        "models": models,
-    }
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
 
     def body() -> int:
-        res = benchmark(args)
+        from export.benchmark import benchmark
+
+        bar = progress(total=args.runs, desc="bench")
+        try:
+            res = benchmark(args.model, compare=args.compare, threads=args.threads, runs=args.runs,
+                            warmup=args.warmup, data=args.data, frames=args.frames, seed=args.seed, spin=args.spin,
+                            torch=args.torch, on_round=lambda _r: bar.update(1))
+        finally:
+            bar.close()
         if args.json:
             print_json(res)
         else:
