@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import TINY_H as H
-from conftest import TINY_SENSOR as SMALL
-from conftest import TINY_W as W
+from tinymodel import TINY_H as H
+from tinymodel import TINY_SENSOR as SMALL
+from tinymodel import TINY_W as W
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
 from edge.io import FrameWriter
@@ -300,7 +300,7 @@ def data_dir(tmp_path_factory) -> Path:
 
 
 def _export(pt: Path, out: Path) -> Path:
-    from conftest import export_checkpoint
+    from tinymodel import export_checkpoint
 
     return export_checkpoint(pt, out)
 
