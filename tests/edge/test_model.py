@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from edge import encoders
 from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
+from edge.train import encoders
 from edge.train.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from edge.train.encoders import VGG_CFGS, VGGEncoder, create_encoder, list_encoders, register_encoder
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
