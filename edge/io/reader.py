@@ -42,6 +42,8 @@ from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, bre
 
 from edge import rosmsg
 from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
+from edge.io.bags import open_bag
+from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
 from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame
 
 __all__ = [
@@ -97,7 +99,7 @@ class _TopicInfo:
     def kind(self) -> str:
         if self.schema_name in ROS_IMAGE_TYPES or self.schema_name in FOXGLOVE_IMAGE_TYPES:
             return "image"
-        if self.schema_name.endswith("RawImage"):
+        if self.schema_name.endswith("RawImage") or self.schema_name in COMPRESSED_IMAGE_TYPES:
             return "image"
         if self.schema_name in CAMERA_INFO_TYPES:
             return "info"
@@ -302,13 +304,19 @@ class _ChannelDecoder:
             if schema is None:
                 raise McapDataError(f"{channel.topic}: protobuf channel without a schema cannot be decoded")
             self._proto = _protobuf_class(schema, channel.topic)
-        elif enc == "cdr" and self.kind == "image" and name not in ROS_IMAGE_TYPES:
+        elif enc == "cdr" and self.kind == "image" and name not in ROS_IMAGE_TYPES | COMPRESSED_IMAGE_TYPES:
             raise McapDataError(
-                f"{channel.topic}: CDR messages of type '{name}' are not supported; "
-                "depth must be sensor_msgs/msg/Image or foxglove.RawImage"
+                f"{channel.topic}: CDR messages of type '{name}' are not supported; depth must be "
+                "sensor_msgs/msg/Image, sensor_msgs/msg/CompressedImage (compressedDepth) or foxglove.RawImage"
             )
+        self.compressed = name in COMPRESSED_IMAGE_TYPES
 
     def image(self, data: bytes, what: str) -> rosmsg.RosImage:
+        if self.enc == "cdr" and self.compressed:
+            c = decode_compressed_image(data, what)
+            arr, pix = decompress_depth(c, what)
+            h, w = arr.shape
+            return rosmsg.RosImage(c.stamp_ns, c.frame_id, h, w, pix, 0, w * arr.itemsize, memoryview(arr.tobytes()))
         if self.enc == "cdr":
             return _ros_image(data, what)
         if self.enc == "json":
@@ -560,6 +568,8 @@ class DepthStream:
         self.damage: str | None = None
         # schemas/channels from an intact summary, for files that define channels only there
         self._summary_records: tuple[dict[int, Schema], dict[int, Channel]] = ({}, {})
+        # ROS bags (`edge.io.bags.BagSource`): the same records, from rosbags instead of the MCAP walk
+        self._source = None
 
     @property
     def depth_encoding(self) -> str | None:
@@ -582,7 +592,11 @@ class DepthStream:
         try:
             try:
                 schemas, channels = (dict(d) for d in self._summary_records)
-                for schema, channel, msg in _walk(self.path, self.size, schemas, channels):
+                records = (
+                    self._source.messages() if self._source is not None
+                    else _walk(self.path, self.size, schemas, channels)
+                )
+                for schema, channel, msg in records:
                     if hook is not None:
                         hook(schema, channel, msg)
                     topic = channel.topic
@@ -646,7 +660,10 @@ def _check_file(path: Path) -> int:
     if path.is_dir():
         inside = sorted(f.name for f in path.glob("*.mcap") if not f.name.startswith("."))
         hint = f" (it holds {_list(inside, 3)})" if inside else ""
-        raise McapDataError(f"{path}: is a directory; pass one .mcap recording{hint}")
+        raise McapDataError(
+            f"{path}: is a directory without metadata.yaml, so not a ROS 2 bag; pass one .mcap, .bag or .db3 "
+            f"recording{hint}"
+        )
     size = path.stat().st_size
     if size == 0:
         raise McapDataError(f"{path}: empty file (0 bytes), not an MCAP recording")
@@ -659,8 +676,8 @@ def _check_file(path: Path) -> int:
         if len(magic) < MAGIC_SIZE and MCAP_MAGIC.startswith(magic):
             raise McapDataError(f"{path}: only {size} bytes: truncated inside the MCAP magic")
         raise McapDataError(
-            f"{path}: not an MCAP file (starts with {magic[:8]!r}); ROS 2 bags must be recorded with "
-            "the mcap storage plugin (`ros2 bag record -s mcap`)"
+            f"{path}: not an MCAP file (starts with {magic[:8]!r}); recordings must be .mcap, a ROS 1 .bag, "
+            "a ROS 2 .db3 or a ROS 2 bag directory"
         )
     return size
 
@@ -707,8 +724,12 @@ def open_depth_stream(
     no usable depth topic; damage *after* the first depth frame is reported during iteration.
     """
     p = Path(path)
-    size = _check_file(p)
-    summ = _read_summary(p)
+    bag = open_bag(p)
+    if bag is None:
+        size = _check_file(p)
+        summ = _read_summary(p)
+    else:
+        size, summ = bag.size, bag.summary()
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     counts: dict[int, int] | None = None
@@ -740,7 +761,8 @@ def open_depth_stream(
     infos: dict[str, dict[str, Any]] = {}
     pos = [0]
     try:
-        for schema, channel, msg in _walk(p, size, schemas, channels, headers, pos):
+        records = bag.messages(pos) if bag is not None else _walk(p, size, schemas, channels, headers, pos)
+        for schema, channel, msg in records:
             t = note(channel)
             if t.kind == "image" and t.first_encoding is None and t.peek_error is None:
                 _peek_image(schema, channel, msg, t)
@@ -778,7 +800,7 @@ def open_depth_stream(
         frame_count = sum(counts.get(c, 0) for c in topics[depth].channel_ids)
         if frame_count == 0:
             raise McapDataError(f"{p}: topic {depth} has no messages; nothing to replay")
-    profile = headers[0].profile if headers else ""
+    profile = headers[0].profile if headers else ("ros2" if bag is not None else "")
     unknown = set(extras) - set(EXTRA_TOPICS)
     if unknown:
         raise ConfigError(f"unknown extras {sorted(unknown)}; choose from {sorted(EXTRA_TOPICS)}")
@@ -789,6 +811,7 @@ def open_depth_stream(
     )
     if summ is not None:
         stream._summary_records = (dict(summ[1]), dict(summ[0]))
+    stream._source = bag
     return stream
 
 
