@@ -20,7 +20,23 @@ from typing import Any
 
 from edge.errors import DepthsegError
 
-__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message"]
+__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version"]
+
+
+def add_version(parser: argparse.ArgumentParser, prog: str) -> None:
+    """``--version``: package version and git commit (`edge.provenance`)."""
+
+    class _Version(argparse.Action):
+        def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+            super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+        def __call__(self, parser, namespace, values, option_string=None):
+            from edge.provenance import version_string
+
+            print(version_string(prog))
+            parser.exit()
+
+    parser.add_argument("--version", action=_Version, help="print the depthseg version and git commit, then exit")
 
 
 def fail(prog: str, message: str, code: int = 2) -> int:

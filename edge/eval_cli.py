@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from edge.cliutil import print_json, progress, run
+from edge.cliutil import add_version, print_json, progress, run
 from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, evaluate, model_label
 from edge.io import TOPIC_DEPTH, TOPIC_LABELS, open_frames
 from edge.metrics import ErrorBreakdown, MetricSummary
@@ -26,6 +26,7 @@ parser = argparse.ArgumentParser(
         "(mono8, nonzero = object). Example: depthseg-eval --data out/test --baseline --figures out/figs"
     ),
 )
+add_version(parser, PROG)
 parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
 parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled .mcap file or directory of them")
 parser.add_argument(

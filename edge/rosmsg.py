@@ -27,9 +27,15 @@ __all__ = [
     "image_to_array",
     "encode_camera_info",
     "decode_camera_info",
+    "STRING_TYPE",
+    "STRING_MSGDEF",
+    "encode_string",
+    "decode_string",
 ]
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
+STRING_TYPE = "std_msgs/msg/String"
+STRING_MSGDEF = "string data\n"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 
 _HEADER_DEF = """================================================================================
@@ -290,6 +296,17 @@ def encode_camera_info(
         wr.u32(0)
     wr.u8(0)
     return wr.bytes()
+
+
+def encode_string(text: str) -> bytes:
+    """CDR bytes of a std_msgs/msg/String (how JSON travels in a ROS 2 file)."""
+    wr = _W()
+    wr.string(text)
+    return wr.bytes()
+
+
+def decode_string(buf: bytes | memoryview, what: str = "String") -> str:
+    return _R(buf, what).string()
 
 
 def decode_camera_info(buf: bytes | memoryview, what: str = "CameraInfo") -> dict:

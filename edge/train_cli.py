@@ -6,7 +6,7 @@ import argparse
 import shlex
 import sys
 
-from edge.cliutil import print_json, progress, run
+from edge.cliutil import add_version, print_json, progress, run
 from edge.errors import ConfigError
 
 PROG = "depthseg-train"
@@ -31,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    add_version(p, PROG)
     d = p.add_argument_group("data")
     d.add_argument("--data", nargs="+", help="MCAP files/directories, split train/val/test by --split")
     d.add_argument("--train-dir", nargs="+", help="explicit training MCAP files/directories")

@@ -6,7 +6,7 @@ import argparse
 from collections.abc import Iterator
 from pathlib import Path
 
-from edge.cliutil import print_json, progress, run
+from edge.cliutil import add_version, print_json, progress, run
 from edge.io import TOPIC_DEPTH, TOPIC_LABELS, Frame
 from edge.tune import OBJECTIVE_FORMS
 
@@ -31,6 +31,7 @@ parser = argparse.ArgumentParser(
         "Tuning an int8 ONNX tunes on the int8 model's own outputs."
     ),
 )
+add_version(parser, PROG)
 parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
 parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled .mcap file or directory of them")
 parser.add_argument("--objective", "-o", default="iou", help=f"what to optimise: {OBJECTIVE_FORMS} (default iou)")

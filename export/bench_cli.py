@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from edge.cliutil import print_json, progress, run
+from edge.cliutil import add_version, print_json, progress, run
 
 PROG = "depthseg-bench"
 
@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG, description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    add_version(p, PROG)
     p.add_argument("--model", type=Path, nargs="+", default=None,
                    help="ONNX model(s) from depthseg-export (default: the shipped edge/models/default.onnx)")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")

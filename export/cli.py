@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from edge.cliutil import print_json, run
+from edge.cliutil import add_version, print_json, run
 
 PROG = "depthseg-export"
 
@@ -36,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG, description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    add_version(p, PROG)
     p.add_argument("--model", type=Path, default=None, help="checkpoint (.pt) to export (default: the shipped edge/models/default.pt)")
     p.add_argument("--single-channel", action="store_true",
                    help="sum the first conv's kernels over its input channels: same output for the paper's replicated input, one channel in")

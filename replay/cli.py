@@ -12,26 +12,33 @@ import argparse
 import sys
 from pathlib import Path
 
-from edge.cliutil import print_json, progress, run
+from edge.cliutil import add_version, print_json, progress, run
 from edge.errors import ConfigError, ModelError
 
 PROG = "depthseg-replay"
 
 DESCRIPTION = """\
-Replay depth frames from an MCAP recording through the segmentation model and report what it
-does: frames/s, latency percentiles, the share of unknown (invalid-depth) pixels and, when the
+Replay depth frames from a recording (MCAP, ROS 1 .bag, ROS 2 .db3 or bag directory) through
+the segmentation model and report what it does: frames/s, latency percentiles, the share of unknown (invalid-depth) pixels and, when the
 recording has labels, IoU, precision, recall and pixel accuracy over valid pixels.
 
-Reads ROS 2 sensor_msgs/msg/Image (32FC1 metres with 0 or NaN invalid; 16UC1 millimetres),
-foxglove RawImage (protobuf or JSON) and depthseg-sim recordings. The depth topic is found
+Reads sensor_msgs/Image (32FC1 metres with 0 or NaN invalid; 16UC1 millimetres),
+sensor_msgs/CompressedImage compressedDepth (png), foxglove RawImage (protobuf or JSON) and
+depthseg-sim recordings; ROS 1 and ROS 2 bags need the 'ros' extra (rosbags). The depth topic is found
 automatically (depth encodings and names); --topic overrides it. CameraInfo is used when present.
 Frames of any size work: they are zero-padded to multiples of 32 for the network and cropped back.
 """
 
 EPILOG = """\
-output (--out): the input's messages copied through, plus /depthseg/mask (mono8: 0 background,
-1 object, 255 unknown) and /depthseg/overlay (rgb8: grey background, orange objects, magenta
-unknown), on the depth frames' timestamps; open it in Foxglove.
+output (--out): the input's messages copied through, plus /depthseg/mask (rgb8: table dark blue,
+objects orange, unknown magenta), /depthseg/mask_raw (mono8: 0 background, 1 object, 255 unknown)
+and /depthseg/overlay (rgb8: grey depth, orange objects, magenta unknown), on the depth frames'
+timestamps; open it in Foxglove. --out-namespace changes the /depthseg prefix.
+live (--serve [HOST:]PORT, needs foxglove-sdk): a Foxglove WebSocket server; in Foxglove choose
+Open connection -> Foxglove WebSocket -> ws://HOST:PORT. It streams <ns>/depth, <ns>/mask,
+<ns>/overlay and <ns>/camera_info while the recording replays (at its own rate unless --rate);
+replay starts when the first client subscribes (--no-wait: at once). HOST defaults to 127.0.0.1
+(this machine only); 0.0.0.0 serves the network.
 A damaged recording is replayed up to the damage; the output is still written, then the error
 is reported and the exit code is 2.
 
@@ -39,6 +46,8 @@ examples:
   depthseg-replay rec.mcap
   depthseg-replay rec.mcap --out rec_seg.mcap --rate 1.0
   depthseg-replay rec.mcap --topic /camera/depth/image_raw --labels-topic "" --json
+  depthseg-replay robot.bag --serve 8765              # then connect Foxglove to ws://127.0.0.1:8765
+  depthseg-replay rosbag2_dir/ --serve 0.0.0.0:8765 --rate 0 --out-namespace /robot1/seg
 """
 
 
@@ -46,7 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog=PROG, description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("recording", type=Path, help="one .mcap file (ROS 2 bag, Foxglove recording or depthseg-sim output)")
+    add_version(p, PROG)
+    p.add_argument("recording", type=Path,
+                   help="an .mcap file (ROS 2, Foxglove or depthseg-sim), a ROS 1 .bag, a ROS 2 .db3 or a ROS 2 bag "
+                   "directory (metadata.yaml)")
     p.add_argument("--model", type=Path, default=None,
                    help="exported .onnx model (default: the shipped edge/models/default.onnx)")
     p.add_argument("--topic", default=None, help="depth image topic (default: detected; the error lists candidates)")
@@ -55,7 +67,13 @@ def build_parser() -> argparse.ArgumentParser:
                    "'' disables scoring)")
     p.add_argument("--out", type=Path, default=None, help="write an MCAP with the input plus mask and overlay topics")
     p.add_argument("--rate", type=float, default=None,
-                   help="pace playback to the recording's timestamps (1.0 = real time; default: as fast as possible)")
+                   help="pace playback to the recording's timestamps (1.0 = real time; 0 = as fast as possible; "
+                   "default: as fast as possible, or 1.0 with --serve)")
+    p.add_argument("--serve", metavar="[HOST:]PORT", default=None,
+                   help="stream depth, mask, overlay and camera info live to Foxglove (WebSocket) while replaying")
+    p.add_argument("--no-wait", action="store_true", help="with --serve: start replaying without waiting for a client")
+    p.add_argument("--out-namespace", default="/depthseg",
+                   help="topic prefix of the mask, mask_raw and overlay topics of --out and --serve (default /depthseg)")
     p.add_argument("--threshold", type=float, default=None,
                    help="object probability threshold (default: the one stored in the model)")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
@@ -90,6 +108,19 @@ def _body(args: argparse.Namespace) -> int:
         )
     if args.out is not None and args.out.resolve() == args.recording.resolve():
         raise ConfigError(f"--out {args.out} is the input recording; choose another file name")
+    from replay.writer import check_namespace
+
+    check_namespace(args.out_namespace)
+    rate = args.rate
+    if rate is None and args.serve is not None:
+        rate = 1.0
+    if rate == 0:
+        rate = None
+    address = None
+    if args.serve is not None:
+        from replay.live import parse_address
+
+        address = parse_address(args.serve)
     stream = open_depth_stream(args.recording, args.topic, args.labels_topic)
     seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold)
     _note(f"depth topic {stream.depth_topic} ({stream.depth_reason})")
@@ -102,6 +133,15 @@ def _body(args: argparse.Namespace) -> int:
             f"(model trained for {s.width}x{s.height} fx {s.fx:.1f} fy {s.fy:.1f})"
         )
     sizes_noted: set[tuple[int, int]] = set()
+    live = None
+    if address is not None:
+        from replay.live import LiveServer
+
+        live = LiveServer(*address, namespace=args.out_namespace)
+        _note(f"live: Foxglove -> Open connection -> Foxglove WebSocket -> {live.url}  (topics {args.out_namespace}/...)")
+        if not args.no_wait:
+            _note("waiting for a Foxglove client to subscribe (Ctrl-C to stop)")
+            live.wait_for_client(None)
     bar = progress(total=stream.frame_count, desc="replay", unit="frame")
 
     def on_frame(r) -> None:
@@ -112,16 +152,20 @@ def _body(args: argparse.Namespace) -> int:
                 f"{PROG}: frames are {hw[1]}x{hw[0]}, the model was trained on {s.width}x{s.height}; "
                 "padded to multiples of 32, scores may differ", file=sys.stderr,
             )
+        if live is not None:
+            live.publish_result(r)
         bar.update(1)
 
     try:
-        summary = replay(stream, seg, out=args.out, rate=args.rate, on_frame=on_frame)
+        summary = replay(stream, seg, out=args.out, rate=rate, on_frame=on_frame, out_namespace=args.out_namespace)
     except ReplayDataError as exc:
         bar.close()
         _report(exc.summary, args.json)
         raise
     finally:
         bar.close()
+        if live is not None:
+            live.close()
     _report(summary, args.json)
     return 0
 

@@ -231,6 +231,7 @@ def replay(
     threshold: float | None = None,
     on_frame: Callable[[FrameResult], None] | None = None,
     warmup: int = 1,
+    out_namespace: str = "/depthseg",
 ) -> ReplaySummary:
     """Segment every frame of ``stream``; optionally pace, score, and write ``out``.
 
@@ -240,6 +241,8 @@ def replay(
     `ReplayDataError` carrying the partial summary is raised. The first frame is first run
     ``warmup`` times untimed (onnxruntime allocates on its first run), so the latency
     percentiles describe the steady state; the wall clock for frames/s includes it.
+    ``out_namespace`` prefixes the topics added to ``out`` (``<ns>/mask``, ``<ns>/mask_raw``,
+    ``<ns>/overlay``).
     """
     if rate is not None and not (rate > 0 and math.isfinite(rate)):
         raise ConfigError(f"`rate` must be a positive number (1.0 = real time), got {rate}")
@@ -252,7 +255,7 @@ def replay(
     if out is not None:
         from replay.writer import ReplayWriter
 
-        writer = ReplayWriter(out, profile=getattr(stream, "profile", ""))
+        writer = ReplayWriter(out, profile=getattr(stream, "profile", ""), namespace=out_namespace)
         if hasattr(stream, "message_hook"):
             stream.message_hook = writer.copy
 

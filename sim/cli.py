@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from edge.cliutil import print_json, run
+from edge.cliutil import add_version, print_json, run
 from edge.errors import ConfigError
 from sim.dataset import simulate
 
@@ -32,6 +32,7 @@ def _parser() -> argparse.ArgumentParser:
             "options. 'depthseg-sim import ...' converts BlenSor scans and royaleviewer PLY captures."
         ),
     )
+    add_version(p, PROG)
     p.add_argument("--out", required=True, help="output folder (created); shards frames_<start>_<stop>.mcap + manifest.json")
     p.add_argument("--frames", type=int, required=True, help="number of frames in the dataset")
     p.add_argument("--seed", type=int, default=0, help="dataset seed (default 0); same seed, same frames")

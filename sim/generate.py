@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError
+from edge.io import SIM_EPOCH_NS
 from edge.meta import SensorSpec
 from sim.physics import PhysicsConfig, PhysicsUnstable, drop
 from sim.render import Camera, ray_grid, render
@@ -212,7 +213,7 @@ def generate_frame(
     label = rr.label
     return SimFrame(
         index=int(index),
-        stamp_ns=int(index) * FRAME_PERIOD_NS,
+        stamp_ns=SIM_EPOCH_NS + int(index) * FRAME_PERIOD_NS,
         depth=out.depth,
         label=label,
         clean=rr.z,

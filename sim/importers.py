@@ -23,7 +23,7 @@ Two sources, so training, evaluation and replay read one format:
   distorted one while the points are undistorted, so the fit leaves ~1.5-2 px RMS; the residual
   is written to the scene JSON. The grey amplitude goes to ``/pico_flexx/image_mono8``.
 
-Timestamps are synthetic: frame i at ``i * 100 ms`` (sources carry no time).
+Timestamps are synthetic: frame i at ``SIM_EPOCH_NS + i * 100 ms`` (sources carry no time).
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import DataError
-from edge.io import FrameWriter
+from edge.io import SIM_EPOCH_NS, FrameWriter
 from edge.meta import fov_intrinsics
 
 __all__ = [
@@ -421,7 +421,7 @@ def import_blensor(
                     "objects": int(np.unique(s.ids[s.ids != bg]).size),
                 },
             }
-            wr.write(i * FRAME_PERIOD_NS, depth, label=label, intrinsics=k, scene=scene)
+            wr.write(SIM_EPOCH_NS + i * FRAME_PERIOD_NS, depth, label=label, intrinsics=k, scene=scene)
     return ImportSummary(
         source="blensor",
         out=o,
@@ -474,7 +474,7 @@ def import_ply(
             total += depth.size
             rms_all.append(rms)
             k_all.append(k)
-            t = i * FRAME_PERIOD_NS
+            t = SIM_EPOCH_NS + i * FRAME_PERIOD_NS
             if cap.grey is not None:
                 wr.write_image(TOPIC_MONO8, t, cap.grey, "mono8")
             scene = {

@@ -9,12 +9,23 @@
 """
 
 from edge.io.atomic import atomic_path, atomic_write, write_bytes_atomic, write_json_atomic
-from edge.io.frames import FRAME_ID, TOPIC_CLEAN, TOPIC_DEPTH, TOPIC_INFO, TOPIC_LABELS, TOPIC_SCENE, Frame
+from edge.io.frames import (
+    FRAME_ID,
+    SIM_EPOCH_NS,
+    TOPIC_CLEAN,
+    TOPIC_DEPTH,
+    TOPIC_INFO,
+    TOPIC_LABELS,
+    TOPIC_SCENE,
+    Frame,
+    decode_scene,
+)
 from edge.io.reader import DepthStream, iter_frames, list_mcap_files, open_depth_stream, open_frames
 from edge.io.writer import FrameWriter, McapWriter
 
 __all__ = [
-    "FRAME_ID", "TOPIC_CLEAN", "TOPIC_DEPTH", "TOPIC_INFO", "TOPIC_LABELS", "TOPIC_SCENE", "Frame",
+    "FRAME_ID", "SIM_EPOCH_NS", "TOPIC_CLEAN", "TOPIC_DEPTH", "TOPIC_INFO", "TOPIC_LABELS", "TOPIC_SCENE", "Frame",
+    "decode_scene",
     "DepthStream", "open_depth_stream", "open_frames", "iter_frames", "list_mcap_files",
     "FrameWriter", "McapWriter", "atomic_path", "atomic_write", "write_bytes_atomic", "write_json_atomic",
 ]

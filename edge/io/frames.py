@@ -5,17 +5,25 @@ Layout (one message of each per frame, all with the frame's timestamp as log tim
 - ``/pico_flexx/labels``       sensor_msgs/msg/Image mono8, 1 = object, 0 = background
 - ``/pico_flexx/camera_info``  sensor_msgs/msg/CameraInfo
 - ``/depthseg/clean_depth``    sensor_msgs/msg/Image 32FC1, noise-free Z (simulated data only)
-- ``/depthseg/scene``          JSON: frame index, seed and scene parameters (regenerate from it)
+- ``/depthseg/scene``          std_msgs/msg/String holding JSON: frame index, seed and scene
+  parameters (regenerate from it). Older files carry it as a JSON channel; readers
+  accept both. Only ROS 2 message types, so ``rosbags`` and ROS 2 tools open the files.
+
+Stamps: the simulator and importers stamp frame i at ``SIM_EPOCH_NS + i * period`` (a fixed,
+real date, so tools that show wall-clock time do not show 1970, and output stays deterministic).
 
 `edge.io.reader` reads it (and any other ROS 2 / Foxglove recording), `edge.io.writer` writes it.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from edge import rosmsg
 
 __all__ = [
     "TOPIC_DEPTH",
@@ -24,7 +32,9 @@ __all__ = [
     "TOPIC_CLEAN",
     "TOPIC_SCENE",
     "FRAME_ID",
+    "SIM_EPOCH_NS",
     "Frame",
+    "decode_scene",
 ]
 
 TOPIC_DEPTH = "/pico_flexx/image_depth"
@@ -33,6 +43,7 @@ TOPIC_INFO = "/pico_flexx/camera_info"
 TOPIC_CLEAN = "/depthseg/clean_depth"
 TOPIC_SCENE = "/depthseg/scene"
 FRAME_ID = "pico_flexx_optical_frame"
+SIM_EPOCH_NS = 1_704_067_200 * 1_000_000_000  # 2024-01-01T00:00:00Z: simulated frame 0
 
 
 @dataclass
@@ -47,3 +58,9 @@ class Frame:
     scene: dict[str, Any] | None = None
     topic: str = TOPIC_DEPTH
     extra: dict[str, Any] = field(default_factory=dict)
+
+
+def decode_scene(message_encoding: str, data: bytes) -> dict[str, Any]:
+    """The scene dict of a ``/depthseg/scene`` message (std_msgs/String CDR, or JSON in older files)."""
+    text = rosmsg.decode_string(data, TOPIC_SCENE) if message_encoding == "cdr" else bytes(data).decode()
+    return json.loads(text)

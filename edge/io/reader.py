@@ -44,7 +44,7 @@ from edge import rosmsg
 from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
 from edge.io.bags import open_bag
 from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
-from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame
+from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame, decode_scene
 
 __all__ = [
     "DepthStream",
@@ -603,7 +603,7 @@ class DepthStream:
                     if topic not in wanted:
                         continue
                     if extra_kind.get(topic) == "scene":
-                        pairer.add("scene", 0, msg.log_time, json.loads(msg.data))
+                        pairer.add("scene", 0, msg.log_time, decode_scene(channel.message_encoding, msg.data))
                         continue
                     dec = decoders.get(channel.id)
                     if dec is None:

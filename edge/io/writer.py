@@ -28,14 +28,6 @@ __all__ = ["McapWriter", "FrameWriter", "COMPRESSIONS"]
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 
-_SCENE_SCHEMA = json.dumps(
-    {
-        "title": "depthseg/Scene",
-        "type": "object",
-        "properties": {"index": {"type": "integer"}, "seed": {"type": "array"}, "params": {"type": "object"}},
-    }
-).encode()
-
 
 class McapWriter:
     """An MCAP file written to a temporary sibling and renamed into place by `close`.
@@ -129,13 +121,13 @@ class FrameWriter(McapWriter):
     def __init__(self, path: str | Path, compression: str = "zstd", chunk_size: int = 4 * 1024 * 1024) -> None:
         super().__init__(path, profile="ros2", library="depthseg", compression=compression, chunk_size=chunk_size)
         info = self._w.register_schema(rosmsg.CAMERA_INFO_TYPE, "ros2msg", rosmsg.CAMERA_INFO_MSGDEF.encode())
-        scene = self._w.register_schema("depthseg/Scene", "jsonschema", _SCENE_SCHEMA)
+        scene = self._w.register_schema(rosmsg.STRING_TYPE, "ros2msg", rosmsg.STRING_MSGDEF.encode())
         self._ch = {
             TOPIC_DEPTH: self.image_channel(TOPIC_DEPTH),
             TOPIC_LABELS: self.image_channel(TOPIC_LABELS),
             TOPIC_INFO: self._w.register_channel(TOPIC_INFO, "cdr", info),
             TOPIC_CLEAN: self.image_channel(TOPIC_CLEAN),
-            TOPIC_SCENE: self._w.register_channel(TOPIC_SCENE, "json", scene),
+            TOPIC_SCENE: self._w.register_channel(TOPIC_SCENE, "cdr", scene, {"content": "application/json"}),
         }
         self.count = 0
 
@@ -164,7 +156,7 @@ class FrameWriter(McapWriter):
         if clean is not None:
             self.add_image(self._ch[TOPIC_CLEAN], t, t, FRAME_ID, np.asarray(clean, dtype=np.float32), "32FC1", seq)
         if scene is not None:
-            data = json.dumps(scene, sort_keys=True).encode()
+            data = rosmsg.encode_string(json.dumps(scene, sort_keys=True))
             self._w.add_message(self._ch[TOPIC_SCENE], log_time=t, publish_time=t, data=data, sequence=seq)
         self.count += 1
 

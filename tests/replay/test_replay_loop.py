@@ -17,7 +17,7 @@ from edge.io.reader import open_depth_stream
 from edge.metrics import logit, segmentation_mask
 from edge.preprocess import valid_mask
 from replay.replay import LatencyHistogram, ReplayDataError, replay
-from replay.writer import MASK_TOPIC, OVERLAY_TOPIC, UNKNOWN_RGB, overlay_rgb
+from replay.writer import MASK_COLOURS, MASK_RAW_TOPIC, MASK_TOPIC, OVERLAY_TOPIC, UNKNOWN_RGB, overlay_rgb
 
 
 def mem_frames(n=4, size=(24, 32), labels=True) -> list[Frame]:
@@ -159,15 +159,19 @@ def test_output_copies_everything_and_adds_mask_and_overlay(fake, tmp_path):
         assert [(t, m.data) for t, _, m in dst[topic]] == [(t, m.data) for t, _, m in msgs], topic
     depth_times = [t for t, _, _ in src[rec.topic]]
     dec = Ros2DecoderFactory()
-    for topic in (MASK_TOPIC, OVERLAY_TOPIC):
+    for topic in (MASK_TOPIC, MASK_RAW_TOPIC, OVERLAY_TOPIC):
         assert [t for t, _, _ in dst[topic]] == depth_times
-    for i, (t, schema, msg) in enumerate(dst[MASK_TOPIC]):
+    for i, (t, schema, msg) in enumerate(dst[MASK_RAW_TOPIC]):
         m = dec.decoder_for("cdr", schema)(msg.data)  # an independent CDR decoder reads it
         assert (m.encoding, m.height, m.width) == ("mono8", 24, 32)
         assert m.header.stamp.sec * 10**9 + m.header.stamp.nanosec == t and m.header.frame_id == "cam"
         mask = np.frombuffer(bytes(m.data), np.uint8).reshape(24, 32)
         assert np.array_equal(mask == 255, np.isnan(rec.depth[i]))
         assert np.array_equal(mask[mask != 255], rec.label[i][mask != 255])
+        # the displayable mask: the same classes as colours (table, object, unknown visibly apart)
+        c = dec.decoder_for("cdr", dst[MASK_TOPIC][i][1])(dst[MASK_TOPIC][i][2].data)
+        assert (c.encoding, c.step) == ("rgb8", 32 * 3)
+        assert np.array_equal(np.frombuffer(bytes(c.data), np.uint8).reshape(24, 32, 3), MASK_COLOURS[mask])
     ov = dec.decoder_for("cdr", dst[OVERLAY_TOPIC][0][1])(dst[OVERLAY_TOPIC][0][2].data)
     assert ov.encoding == "rgb8" and ov.step == 32 * 3
     rgb = np.frombuffer(bytes(ov.data), np.uint8).reshape(24, 32, 3)

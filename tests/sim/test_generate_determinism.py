@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 
+from edge.io import SIM_EPOCH_NS
 from sim.generate import FRAME_PERIOD_NS, SimConfig, generate_frame
 from sim.render import ray_grid
 from sim.scene import camera_rotation
@@ -37,7 +38,7 @@ def test_frame_contents():
     assert f.depth.shape == (h, w) and f.depth.dtype == np.float32
     assert f.label.dtype == np.uint8 and set(np.unique(f.label)) <= {0, 1}
     assert f.label.any()
-    assert f.stamp_ns == 7 * FRAME_PERIOD_NS
+    assert f.stamp_ns == SIM_EPOCH_NS + 7 * FRAME_PERIOD_NS
     valid = f.depth > 0
     assert 0.9 < valid.mean() < 1.0  # some invalid pixels (corners), mostly valid
     cam = f.scene["params"]["camera"]

@@ -50,7 +50,8 @@ def test_output_opens_with_mcap_and_decodes_with_mcap_ros2(dataset):
         for schema, channel, message in reader.iter_messages():
             seen[channel.topic] = seen.get(channel.topic, 0) + 1
             if channel.topic == fr.TOPIC_SCENE:
-                scene = json.loads(message.data)
+                assert schema.name == "std_msgs/msg/String" and channel.message_encoding == "cdr"
+                scene = fr.decode_scene(channel.message_encoding, message.data)
                 assert scene["seed"] == [4, scene["index"]]
                 continue
             msg = DecoderFactory().decoder_for(channel.message_encoding, schema)(message.data)
@@ -72,7 +73,7 @@ def test_shards_equal_frames_regenerated_alone(dataset):
 
     out, _ = dataset
     frames = list(fr.iter_frames(out, with_clean=True))
-    assert [f.stamp_ns for f in frames] == [i * 22_222_222 for i in range(5)]
+    assert [f.stamp_ns for f in frames] == [fr.SIM_EPOCH_NS + i * 22_222_222 for i in range(5)]  # 2024, not 1970
     again = generate_frame(4, 4)
     np.testing.assert_array_equal(frames[4].depth, again.depth)
     np.testing.assert_array_equal(frames[4].label, again.label)
