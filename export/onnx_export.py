@@ -69,7 +69,14 @@ def quiet_export() -> Iterator[None]:
 
 
 def set_metadata(model_proto, props: dict[str, str]) -> None:
-    """Replace ``metadata_props`` entries with ``props`` (other keys kept)."""
+    """Replace ``metadata_props`` entries with ``props`` (other keys kept).
+
+    Every write also stamps ``depthseg_version`` and ``git_commit`` (`edge.provenance`): the code
+    that wrote the file, read at run time.
+    """
+    from edge.provenance import provenance
+
+    props = {**provenance(), **props}
     keep = [(p.key, p.value) for p in model_proto.metadata_props if p.key not in props]
     del model_proto.metadata_props[:]
     for k, v in keep + sorted(props.items()):

@@ -27,6 +27,7 @@ from typing import Any
 
 from edge.cliutil import progress
 from edge.errors import ConfigError, DataError
+from edge.provenance import provenance
 
 __all__ = ["simulate", "shard_name", "plan_shards", "MANIFEST"]
 
@@ -204,6 +205,7 @@ def simulate(
         "config": config.to_dict(),
         "objects_folder": None if objects is None else str(objects),
         "objects_skipped": skipped,
+        "provenance": provenance(),  # depthseg version and git commit that wrote it
         "shards": shard_stats,
     }
     _write_json_atomic(out / MANIFEST, manifest)

@@ -30,7 +30,12 @@ def save_checkpoint(path: str | Path, model: FCN8s, meta: ModelMeta, **extra: An
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = meta.with_(params=count_parameters(model))
-    blob = {"format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(), "state_dict": model.state_dict()}
+    from edge.provenance import provenance
+
+    blob = {
+        "format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(), "state_dict": model.state_dict(),
+        "provenance": provenance(),  # depthseg version and git commit that wrote it
+    }
     blob.update(extra)
     with atomic_write(path) as tmp:
         torch.save(blob, tmp)

@@ -152,3 +152,45 @@ def test_compressed_depth_recording_replays_like_raw_16uc1(tmp_path):
     c, _, _ = masks_of(to_ros1(tmp_path / "cd.mcap", tmp_path / "cd.bag"))
     for x, y in zip(c, b):
         np.testing.assert_array_equal(x, y)
+
+
+def test_replay_outputs_open_in_rosbags_anyreader(tmp_path):
+    """--out of a ROS 2 recording (with an old-style JSON channel) and of a ROS 1 bag are ROS 2 files."""
+    from rosbags.highlevel import AnyReader
+
+    src = tmp_path / "in.mcap"
+    with open(src, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(rosmsg.IMAGE_TYPE, "ros2msg", rosmsg.IMAGE_MSGDEF.encode())
+        js = w.register_schema("depthseg/Scene", "jsonschema", b"{}")
+        ch = w.register_channel("/pico_flexx/image_depth", "cdr", sid)
+        jch = w.register_channel("/depthseg/scene", "json", js)
+        for i in range(3):
+            t = T0 + i * PERIOD
+            w.add_message(ch, t, rosmsg.encode_image(t, "cam", scene(i)[0], "32FC1"), t)
+            w.add_message(jch, t, b'{"index": %d}' % i, t)
+        w.finish()
+    outs = []
+    bag = to_ros1(write_ros2(tmp_path / "plain.mcap", n=3, labels=False, info=False).path, tmp_path / "in.bag")
+    for path in (src, bag):
+        out = tmp_path / f"out_{path.suffix[1:]}.mcap"
+        replay(open_depth_stream(path), FakeSegmenter(), out=out, out_namespace="/seg")
+        outs.append(out)
+    for out in outs:
+        with AnyReader([out]) as r:
+            types = {c.topic: c.msgtype for c in r.connections}
+            assert types["/seg/mask"] == types["/seg/mask_raw"] == types["/seg/overlay"] == "sensor_msgs/msg/Image"
+            assert types.get("/depthseg/scene", "std_msgs/msg/String") == "std_msgs/msg/String"
+            seen: dict[str, int] = {}
+            for conn, t, raw in r.messages():
+                msg = r.deserialize(raw, conn.msgtype)
+                seen[conn.topic] = seen.get(conn.topic, 0) + 1
+                if conn.topic == "/seg/mask":
+                    assert msg.encoding == "rgb8" and msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t
+                if conn.topic == "/depthseg/scene":
+                    assert msg.data.startswith('{"index": ')
+            assert {k: v for k, v in seen.items() if k != "/depthseg/scene"} == {
+                "/pico_flexx/image_depth": 3, "/seg/mask": 3, "/seg/mask_raw": 3, "/seg/overlay": 3}
+            if out == outs[0]:  # the JSON scene of the input, copied as std_msgs/String
+                assert seen["/depthseg/scene"] == 3
