@@ -21,7 +21,7 @@ DEFAULT_ONNX = MODELS_DIR / "default.onnx"  # single-channel fp32 export of the 
 SUFFIXES = {"onnx": (".onnx",), "pt": (".pt", ".pth")}
 _REBUILD = {
     "onnx": "export it: depthseg-export --single-channel --out edge/models/default.onnx",
-    "pt": "rebuild it with tools/train_default.sh",
+    "pt": "rebuild it: bash tools/train_default.sh",
 }
 
 
@@ -54,7 +54,8 @@ def resolve_model(path: str | Path | None, kinds: Sequence[str] = ("onnx", "pt")
             return found[0]
         missing = " or ".join(str(_default(k)) for k in kinds)
         raise ModelError(
-            f"the shipped default model is missing ({missing}); name a model file, or {_REBUILD[kinds[0]]}"
+            f"the shipped default model is missing ({missing}); name a model file, reinstall depthseg "
+            f"(pip install --force-reinstall depthseg), or in a source checkout {_REBUILD[kinds[0]]}"
         )
     p = Path(path)
     if not p.exists():

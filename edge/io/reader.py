@@ -42,7 +42,7 @@ from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, bre
 
 from edge import rosmsg
 from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
-from edge.io.bags import open_bag
+from edge.io.bags import is_bag, open_bag
 from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
 from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame, decode_scene
 
@@ -819,14 +819,25 @@ def open_depth_stream(
 
 
 def list_mcap_files(path: str | Path) -> list[Path]:
-    """One .mcap file, or the complete .mcap files of a directory (sorted; hidden temp files skipped)."""
+    """One recording, or the recordings of a directory (sorted; hidden temp files skipped).
+
+    Recordings: .mcap files, ROS 1 .bag, ROS 2 .db3 files and ROS 2 bag directories (metadata.yaml),
+    the last three read through `edge.io.bags`.
+    """
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file or directory")
+    if p.is_dir() and is_bag(p):
+        return [p]  # a ROS 2 bag directory is one recording
     if p.is_dir():
-        files = sorted(f for f in p.glob("*.mcap") if not f.name.startswith("."))
+        files = sorted(
+            f for f in p.iterdir() if not f.name.startswith(".") and (f.suffix == ".mcap" or is_bag(f))
+        )
         if not files:
-            raise DataError(f"{p}: directory holds no .mcap files; generate some with depthseg-sim --out {p}")
+            raise DataError(
+                f"{p}: directory holds no recordings (.mcap, .bag, .db3 or ROS 2 bag directories); pass a "
+                f"recording, or simulate labelled frames with depthseg-sim --out {p}"
+            )
         return files
     return [p]
 
@@ -840,14 +851,14 @@ def open_frames(
     extras: tuple[str, ...] = (),
     tolerance_ns: int = DEFAULT_TOLERANCE_NS,
 ) -> tuple[Iterator[Frame], int | None]:
-    """Frames of a .mcap file or of every recording in a directory, and their count when known.
+    """Frames of one recording or of every recording in a directory, and their count when known.
 
     Every file is opened (topics detected, labels checked) before the first frame is delivered,
     so a missing label topic fails at once instead of after minutes of work. Training, evaluation,
     tuning and the tools all read through here, so a recording one of them accepts, all accept.
 
     Args:
-        path: a .mcap file or a directory of them.
+        path: a recording (`list_mcap_files`) or a directory of them.
         depth_topic: the depth Image topic (None: detected per file).
         labels_topic: the label Image topic (None: detected; ``""``: no labels).
         require_labels: raise when a file has no label topic or no label message.

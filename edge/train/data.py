@@ -64,7 +64,9 @@ def load_frames(
             if fr.label is None:
                 raise DataError(
                     f"{path}: depth frame at log time {fr.stamp_ns} ns has no label within "
-                    f"{DEFAULT_TOLERANCE_NS / 1e6:g} ms of its stamp; training needs every frame labelled"
+                    f"{DEFAULT_TOLERANCE_NS / 1e6:g} ms of its stamp; training needs every frame labelled "
+                    "(a label image per depth frame: sensor_msgs/Image mono8, nonzero = object, on a topic named "
+                    "like /camera/labels, with the depth's header stamp)"
                 )
             if depths and fr.depth.shape != depths[0].shape:
                 raise DataError(f"{path}: frames of different sizes {fr.depth.shape} vs {depths[0].shape}")

@@ -194,3 +194,19 @@ def test_replay_outputs_open_in_rosbags_anyreader(tmp_path):
                 "/pico_flexx/image_depth": 3, "/seg/mask": 3, "/seg/mask_raw": 3, "/seg/overlay": 3}
             if out == outs[0]:  # the JSON scene of the input, copied as std_msgs/String
                 assert seen["/depthseg/scene"] == 3
+
+
+def test_training_loads_labelled_frames_from_bags(tmp_path):
+    """depthseg-train/eval/tune data: a labelled .bag, .db3 or bag directory is read like the MCAP."""
+    from edge.io import list_mcap_files
+    from edge.train.data import load_frames
+
+    rec = write_ros2(tmp_path / "rec.mcap", n=4)
+    bag = to_ros1(rec.path, tmp_path / "bags" / "a.bag") if (tmp_path / "bags").mkdir() is None else None
+    d2 = to_ros2(rec.path, tmp_path / "bags" / "b")
+    assert list_mcap_files(tmp_path / "bags") == [bag, d2]
+    for src in (rec.path, bag, d2, next(d2.glob("*.db3"))):
+        fs = load_frames([src])
+        assert len(fs) == 4
+        np.testing.assert_array_equal(fs.label, np.stack(rec.label))
+        np.testing.assert_array_equal(fs.depth, np.stack(rec.depth))
