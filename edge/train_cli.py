@@ -34,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_version(p, PROG)
     d = p.add_argument_group("data")
     d.add_argument("--data", nargs="+", help="MCAP files/directories, split train/val/test by --split")
-    d.add_argument("--train-dir", nargs="+", help="explicit training MCAP files/directories")
+    d.add_argument("--train-dir", nargs="+", help="explicit training recordings (.mcap, .bag, .db3, bag directories) or directories of them")
     d.add_argument("--val-dir", nargs="+", help="explicit validation MCAP files/directories")
     d.add_argument("--split", default="0.7,0.2,0.1", help="train,val,test fractions for --data (default: %(default)s, the paper's)")
     d.add_argument("--limit", type=int, help="use at most this many frames (quick experiments)")

@@ -33,7 +33,7 @@ parser = argparse.ArgumentParser(
 )
 add_version(parser, PROG)
 parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
-parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled .mcap file or directory of them")
+parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled recording (.mcap, .bag, .db3, ROS 2 bag directory) or a directory of them")
 parser.add_argument("--objective", "-o", default="iou", help=f"what to optimise: {OBJECTIVE_FORMS} (default iou)")
 parser.add_argument("--split", type=float, default=0.25, metavar="F",
                     help="fraction of frames held out for the before/after report (default 0.25; 0 = report in-sample)")
