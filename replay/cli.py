@@ -47,7 +47,7 @@ examples:
   depthseg-replay rec.mcap --out rec_seg.mcap --rate 1.0
   depthseg-replay rec.mcap --topic /camera/depth/image_raw --labels-topic "" --json
   depthseg-replay robot.bag --serve 8765              # then connect Foxglove to ws://127.0.0.1:8765
-  depthseg-replay rosbag2_dir/ --serve 0.0.0.0:8765 --rate 0 --out-namespace /robot1/seg
+  depthseg-replay rosbag2_dir/ --serve 0.0.0.0:8765 --no-pace --out-namespace /robot1/seg
 """
 
 
@@ -67,11 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "'' disables scoring)")
     p.add_argument("--out", type=Path, default=None, help="write an MCAP with the input plus mask and overlay topics")
     p.add_argument("--rate", type=float, default=None,
-                   help="pace playback to the recording's timestamps (1.0 = real time; 0 = as fast as possible; "
-                   "default: as fast as possible, or 1.0 with --serve)")
+                   help="pace playback to the recording's timestamps (1.0 = real time; default: as fast as "
+                   "possible, or 1.0 with --serve)")
     p.add_argument("--serve", metavar="[HOST:]PORT", default=None,
                    help="stream depth, mask, overlay and camera info live to Foxglove (WebSocket) while replaying")
     p.add_argument("--no-wait", action="store_true", help="with --serve: start replaying without waiting for a client")
+    p.add_argument("--no-pace", action="store_true", help="with --serve: replay as fast as possible instead of at 1.0")
     p.add_argument("--out-namespace", default="/depthseg",
                    help="topic prefix of the mask, mask_raw and overlay topics of --out and --serve (default /depthseg)")
     p.add_argument("--threshold", type=float, default=None,
@@ -111,11 +112,11 @@ def _body(args: argparse.Namespace) -> int:
     from replay.writer import check_namespace
 
     check_namespace(args.out_namespace)
+    if args.no_pace and args.rate is not None:
+        raise ConfigError("--no-pace and --rate contradict each other; give one")
     rate = args.rate
-    if rate is None and args.serve is not None:
+    if rate is None and args.serve is not None and not args.no_pace:
         rate = 1.0
-    if rate == 0:
-        rate = None
     address = None
     if args.serve is not None:
         from replay.live import parse_address

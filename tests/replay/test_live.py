@@ -131,7 +131,7 @@ def test_replay_cli_serve_and_one_line_errors(tmp_path, linear_onnx, capsys):
 
     rec = write_ros2(tmp_path / "rec.mcap", n=5)
     argv = [str(rec.path), "--model", str(linear_onnx), "--json"]
-    assert main(argv + ["--serve", "127.0.0.1:0", "--no-wait", "--rate", "0", "--out-namespace", "/r1/seg"]) == 0
+    assert main(argv + ["--serve", "127.0.0.1:0", "--no-wait", "--no-pace", "--out-namespace", "/r1/seg"]) == 0
     cap = capsys.readouterr()
     assert '"frames": 5' in cap.out and "ws://127.0.0.1:" in cap.err and "/r1/seg" in cap.err
     for bad, needle in ((["--serve", "host:port"], "expected [HOST:]PORT"),
