@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from edge.io import TOPIC_DEPTH, iter_frames
+from edge.io import SIM_EPOCH_NS, TOPIC_DEPTH, iter_frames
 from sim import cli, dataset
 
 FRAMES, SHARD = 30, 3
@@ -68,7 +68,7 @@ def test_kill_and_resume_loses_and_duplicates_nothing(tmp_path):
     fa, fb = _frames(a), _frames(b)
     stamps = [f.stamp_ns for f in iter_frames(a)]
     assert len(stamps) == len(set(stamps)) == FRAMES  # no duplicates, no losses
-    assert sorted(fa) == sorted(fb) == [i * 22_222_222 for i in range(FRAMES)]
+    assert sorted(fa) == sorted(fb) == [SIM_EPOCH_NS + i * 22_222_222 for i in range(FRAMES)]
     for t in fa:
         np.testing.assert_array_equal(fa[t].depth, fb[t].depth)
         np.testing.assert_array_equal(fa[t].label, fb[t].label)
@@ -83,4 +83,4 @@ def test_resume_after_a_longer_request_replaces_the_short_last_shard(tmp_path):
     dataset.simulate(tmp_path / "o", frames=3, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
     s = dataset.simulate(tmp_path / "o", frames=5, seed=1, workers=1, shard_frames=2, config=c, show_progress=False)
     assert s["resumed_shards"] == 1 and s["removed_stale_shards"] == 1 and s["generated"] == 3
-    assert [f.stamp_ns // 22_222_222 for f in iter_frames(tmp_path / "o")] == [0, 1, 2, 3, 4]
+    assert [(f.stamp_ns - SIM_EPOCH_NS) // 22_222_222 for f in iter_frames(tmp_path / "o")] == [0, 1, 2, 3, 4]
