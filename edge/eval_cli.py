@@ -28,7 +28,7 @@ parser = argparse.ArgumentParser(
 )
 add_version(parser, PROG)
 parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
-parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled .mcap file or directory of them")
+parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled recording (.mcap, .bag, .db3, ROS 2 bag directory) or a directory of them")
 parser.add_argument(
     "--threshold", "-t", type=float, default=None,
     help="decision boundary on the object probability (default: the one stored in the model, else 0.5)",

@@ -174,7 +174,8 @@ def _body(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    return run(PROG, lambda: _body(args), parser, aliases={"depth_topic": "--topic"})
+    aliases = {"depth_topic": "--topic", "namespace": "--out-namespace", "address": "--serve", "port": "--serve [HOST:]PORT"}
+    return run(PROG, lambda: _body(args), parser, aliases=aliases)
 
 
 if __name__ == "__main__":  # pragma: no cover

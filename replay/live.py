@@ -42,16 +42,16 @@ __all__ = ["LiveServer", "stream_live", "parse_address", "live_topics", "INSTALL
 INSTALL_HINT = "pip install 'depthseg[ros]' (or: pip install foxglove-sdk)"
 
 
-def parse_address(text: str) -> tuple[str, int]:
+def parse_address(address: str) -> tuple[str, int]:
     """``"8765"`` -> ("127.0.0.1", 8765); ``"0.0.0.0:8765"`` -> ("0.0.0.0", 8765)."""
-    host, _, port = str(text).rpartition(":")
+    host, _, port = str(address).rpartition(":")
     host = host.strip("[]") or "127.0.0.1"
     try:
         p = int(port)
     except ValueError:
-        raise ConfigError(f"--serve '{text}': expected [HOST:]PORT such as 8765 or 0.0.0.0:8765") from None
+        raise ConfigError(f"`address` '{address}': expected [HOST:]PORT such as 8765 or 0.0.0.0:8765") from None
     if not 0 <= p <= 65535:
-        raise ConfigError(f"--serve '{text}': port must be 0-65535 (0 = any free port)")
+        raise ConfigError(f"`address` '{address}': port must be 0-65535 (0 = any free port)")
     return host, p
 
 
@@ -108,8 +108,8 @@ class LiveServer:
             )
         except Exception as exc:  # the SDK raises RuntimeError with the OS's text for a taken port
             raise ConfigError(
-                f"cannot serve on {host}:{port} ({' '.join(str(exc).split())[:160]}); choose another with --serve "
-                "HOST:PORT"
+                f"cannot serve on {host}:{port} ({' '.join(str(exc).split())[:160]}); choose another `port` "
+                "(0 picks a free one)"
             ) from None
         self.host = host
         self.port = int(self._server.port)

@@ -62,7 +62,7 @@ def check_namespace(ns: str) -> str:
     ns = ns.rstrip("/") if ns not in ("", "/") else ns
     if not _NAMESPACE_RE.match(ns):
         raise ConfigError(
-            f"--out-namespace '{ns}' is not a ROS namespace; use '/name' or '/a/b' (letters, digits, _; "
+            f"`namespace` '{ns}' is not a ROS namespace; use '/name' or '/a/b' (letters, digits, _; "
             "each part starts with a letter)"
         )
     return ns

@@ -122,7 +122,7 @@ def test_python_api_takes_plain_arrays_and_a_taken_port_is_one_line(tmp_path):
         depth[2:4, 2:4] = 0.25
         s = stream_live([depth, depth, depth], FakeSegmenter(), server=srv)
         assert s.frames == 3 and srv.published == 3
-    with pytest.raises(ConfigError, match="not a ROS namespace"):
+    with pytest.raises(ConfigError, match="`namespace` 'robot 1' is not a ROS namespace"):  # library: parameter names
         LiveServer("127.0.0.1", 0, namespace="robot 1")
 
 
@@ -134,8 +134,8 @@ def test_replay_cli_serve_and_one_line_errors(tmp_path, linear_onnx, capsys):
     assert main(argv + ["--serve", "127.0.0.1:0", "--no-wait", "--no-pace", "--out-namespace", "/r1/seg"]) == 0
     cap = capsys.readouterr()
     assert '"frames": 5' in cap.out and "ws://127.0.0.1:" in cap.err and "/r1/seg" in cap.err
-    for bad, needle in ((["--serve", "host:port"], "expected [HOST:]PORT"),
-                        (["--out-namespace", "no slash"], "not a ROS namespace")):
+    for bad, needle in ((["--serve", "host:port"], "--serve 'host:port': expected [HOST:]PORT"),
+                        (["--out-namespace", "no slash"], "--out-namespace 'no slash' is not a ROS namespace")):
         assert main(argv + bad) == 2
         err = capsys.readouterr().err.strip()
         assert needle in err and len(err.splitlines()) == 1 and "Traceback" not in err
