@@ -4,6 +4,8 @@
 - `edge.io.reader`: `open_depth_stream` (one recording) and `open_frames` / `iter_frames` (a
   file or a directory): damage tolerant, streaming in file order, topics detected, labels and
   the simulator's extras paired with depth by timestamp.
+- `edge.io.bags`: ROS 1 .bag, ROS 2 .db3 and bag directories (``rosbags``, the ``ros`` extra) as
+  the reader's MCAP records; `edge.io.compressed`: compressedDepth (16-bit PNG) decoding.
 - `edge.io.writer`: `McapWriter` (atomic, compressed) and `FrameWriter` (the depthseg layout).
 - `edge.io.atomic`: `atomic_write` and friends, for every other output file.
 """

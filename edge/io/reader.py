@@ -1,4 +1,4 @@
-"""Stream depth frames out of any MCAP recording: ROS 2 bags, Foxglove recordings, our simulations.
+"""Stream depth frames out of any recording: MCAP (ROS 2 bags, Foxglove, our simulations), ROS 1/2 bags.
 
 Why a reader of our own instead of ``mcap.reader.make_reader(...).iter_messages()``:
 
@@ -15,8 +15,13 @@ Why a reader of our own instead of ``mcap.reader.make_reader(...).iter_messages(
 
 Decoders: ROS 2 CDR through `edge.rosmsg` (size-checked against height x step before any pixel is
 trusted), foxglove ``RawImage`` in protobuf (schema = FileDescriptorSet, `mcap_protobuf`) and in
-JSON (``data`` base64, as Foxglove writes it). Invalid depth pixels (0, NaN, negative, inf) are
-passed through untouched: `edge.preprocess` owns what counts as invalid.
+JSON (``data`` base64, as Foxglove writes it), and ``sensor_msgs/CompressedImage`` compressedDepth
+(`edge.io.compressed`). Invalid depth pixels (0, NaN, negative, inf) are passed through untouched:
+`edge.preprocess` owns what counts as invalid.
+
+ROS 1 ``.bag``, ROS 2 ``.db3`` and ROS 2 bag directories are not a second reader: `edge.io.bags`
+turns them into the same (schema, channel, message) records that the MCAP walk yields, so topic
+detection, pairing, decoding and errors are this module's for every format.
 
 Labels (mono8, nonzero = object) are paired with depth frames by header timestamp (log time when
 the header stamp is 0) within a tolerance, looking at most ``window`` frames ahead.
