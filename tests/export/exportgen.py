@@ -15,16 +15,19 @@ import torch
 from torch import nn
 
 from edge.meta import ModelMeta
-from edge.preprocess import preprocess_batch
+from edge.preprocess import preprocess_batch_for
 from edge.sampleframes import synthetic_frames
 from edge.train.model import FCN8s, build_model, count_parameters
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
 
 
-def tiny_model(seed: int = 0, in_channels: int = 3, width: float = 0.125) -> tuple[FCN8s, ModelMeta]:
+def tiny_model(seed: int = 0, in_channels: int = 3, width: float = 0.125, **meta_kw) -> tuple[FCN8s, ModelMeta]:
+    """A tiny vgg11_bn with batch-norm statistics from frames through its own preprocessing;
+    ``meta_kw`` sets further `ModelMeta` fields (e.g. standardize, cues)."""
     meta = ModelMeta(encoder="vgg11", width=width, batch_norm=True, in_channels=in_channels,
-                     training={"weights": "random-init + batch-norm statistics", "seed": seed, "purpose": "tests"})
+                     training={"weights": "random-init + batch-norm statistics", "seed": seed, "purpose": "tests"},
+                     **meta_kw)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model = build_model(meta)
@@ -32,7 +35,7 @@ def tiny_model(seed: int = 0, in_channels: int = 3, width: float = 0.125) -> tup
         if isinstance(m, nn.BatchNorm2d):
             m.reset_running_stats()
             m.momentum = None
-    x, _ = preprocess_batch(synthetic_frames(4, seed + 100).depth, in_channels)
+    x, _ = preprocess_batch_for(synthetic_frames(4, seed + 100).depth, meta)
     model.train()
     with torch.no_grad():
         model(torch.from_numpy(x))

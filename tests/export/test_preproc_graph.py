@@ -79,30 +79,10 @@ ROBUST_HEIGHT = {"standardize": "robust", "cues": ("height",)}
 
 
 def _cue_model(seed: int = 3, **kw):
-    """A tiny 3-channel vgg11_bn with ``kw`` (standardize, cues), batch-norm statistics from frames
-    through its own preprocessing (as `exportgen.tiny_model`), then converted to one channel."""
-    import torch
-    from torch import nn
-
-    from edge.preprocess import preprocess_batch_for
-    from edge.sampleframes import synthetic_frames
-    from edge.train.model import build_model, count_parameters
+    """`exportgen.tiny_model` with ``kw`` (standardize, cues), converted to one depth channel."""
     from export.single_channel import to_single_channel
 
-    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=3, training={"purpose": "tests"}, **kw)
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        model = build_model(meta)
-    for m in model.modules():
-        if isinstance(m, nn.BatchNorm2d):
-            m.reset_running_stats()
-            m.momentum = None
-    x, _ = preprocess_batch_for(synthetic_frames(4, seed + 100).depth, meta)
-    model.train()
-    with torch.no_grad():
-        model(torch.from_numpy(x))
-    model.eval()
-    return to_single_channel(model, meta.with_(params=count_parameters(model)))
+    return to_single_channel(*tiny_model(seed, **kw))
 
 
 def _hard_frames() -> list[np.ndarray]:
