@@ -50,9 +50,14 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
     if p.is_dir():
         raise ModelError(f"{p}: is a directory, expected a .pt checkpoint")
     try:
-        blob = torch.load(p, map_location="cpu", weights_only=False)
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure means a corrupt file
-        raise ModelError(f"{p}: not a readable depthseg checkpoint ({type(exc).__name__}); re-train or re-download it") from None
+        # weights_only: a checkpoint is tensors, numbers, strings and containers; unpickling
+        # anything else (code) is refused, so a hostile .pt cannot run code (issue 11)
+        blob = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure means a corrupt or unsafe file
+        raise ModelError(
+            f"{p}: not a readable depthseg checkpoint ({type(exc).__name__}: only weights, numbers and "
+            "strings are loaded); re-train or re-export it"
+        ) from None
     if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
         raise ModelError(f"{p}: not a depthseg checkpoint (no '{CHECKPOINT_FORMAT}' format tag)")
     return blob

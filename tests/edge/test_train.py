@@ -122,3 +122,22 @@ def _write_tiny_mcap(d) -> None:
     with FrameWriter(d / "a.mcap") as w:
         for i in range(len(fs)):
             w.write(i * 1000, fs.depth[i], fs.label[i])
+
+
+class _Evil:
+    """Unpickling this would create a file: the code-execution class of issue 11."""
+
+    def __init__(self, target: str) -> None:
+        self.target = target
+
+    def __reduce__(self):
+        return (open, (self.target, "w"))
+
+
+def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path) -> None:
+    target = tmp_path / "pwned"
+    bad = tmp_path / "evil.pt"
+    torch.save({"format": "depthseg-checkpoint", "payload": _Evil(str(target))}, bad)
+    with pytest.raises(ModelError, match="not a readable depthseg checkpoint"):
+        read_checkpoint(bad)
+    assert not target.exists()
