@@ -174,6 +174,19 @@ def _settle(
     return scene, np.zeros((0, 3)), np.zeros((0, 4)), info
 
 
+def _view(index: int, seed: int, config: SimConfig, library: MeshLibrary | None):
+    """Scene ``index // V`` (settled once per worker) seen from the pose of view ``index % V``."""
+    from sim.views import sample_view, settled_cached, view_streams
+
+    s, v, scene_ss, pose_ss = view_streams(seed, index, config.scene.views_per_scene)
+    lib_key = None if library is None else tuple(str(p) for p in library.paths)
+    st = settled_cached((int(seed), s, config.digest(), lib_key),
+                        lambda: _settle(np.random.default_rng(scene_ss), config, library))
+    scene = sample_view(np.random.default_rng(pose_ss), config.scene, st.scene)
+    info = {"scene_index": s, "view": v, "views_per_scene": config.scene.views_per_scene}
+    return scene, st.pos, st.quat, st.phys, st.render_cache, info
+
+
 def generate_frame(
     index: int, seed: int, config: SimConfig | None = None, library: MeshLibrary | None = None
 ) -> SimFrame:
@@ -181,10 +194,14 @@ def generate_frame(
     config = config or SimConfig()
     ss = np.random.SeedSequence([int(seed), int(index)])
     scene_ss, sensor_ss, camera_ss = ss.spawn(3)  # the first two as before: same frames
-    scene_rng = np.random.default_rng(scene_ss)
     sensor_rng = np.random.default_rng(sensor_ss)
 
-    scene, pos, quat, phys = _settle(scene_rng, config, library)
+    views = config.scene.views_per_scene
+    render_cache = None
+    if views == 1:
+        scene, pos, quat, phys = _settle(np.random.default_rng(scene_ss), config, library)
+    else:  # several camera poses per settled scene (sim.views)
+        scene, pos, quat, phys, render_cache, view = _view(index, seed, config, library)
     meshes = []
     for k, obj in enumerate(scene.objects):
         rot = quat_to_matrix(quat[k])
@@ -199,6 +216,7 @@ def generate_frame(
         threads=config.render_threads,
         support=scene.render_support(),
         background=scene.background_meshes(),
+        cache=render_cache,
     )
     draw = draw_frame_params(sensor_rng, config.sensor, len(scene.objects))
     out = apply_sensor(rr, ray_grid(cam), cam.fx, scene.camera_height, draw, config.sensor, sensor_rng)
@@ -210,6 +228,8 @@ def generate_frame(
     params["physics"] = phys
     params["sensor"] = draw.to_params()
     params["config_digest"] = config.digest()
+    if views > 1:
+        params["view"] = view
     label = rr.label
     return SimFrame(
         index=int(index),

@@ -263,12 +263,15 @@ def render(
     threads: int = 1,
     support: Support | None = None,
     background: list[tuple[np.ndarray, np.ndarray]] | tuple = (),
+    cache: dict | None = None,
 ) -> RenderResult:
     """Cast one frame. ``meshes`` are (vertices, triangles) in world coordinates, floor at z = 0.
 
     ``rotation`` is world-from-camera, ``position`` the camera centre in the world. The floor
     (or the ``support``) is intersected analytically; only rays that may meet a mesh are cast.
     ``background`` meshes (tray walls) are cast like objects but labelled FLOOR_ID.
+    ``cache``: a dict owned by the caller for one fixed set of meshes (several views of one
+    settled scene); the Embree scene is built once and kept in it.
     """
     import open3d as o3d
 
@@ -283,12 +286,16 @@ def render(
     meshes = list(meshes) + list(background)
     scene = None
     if meshes:
-        scene = o3d.t.geometry.RaycastingScene(nthreads=threads)
-        for v, t in meshes:
-            scene.add_triangles(
-                o3d.core.Tensor(np.ascontiguousarray(v, dtype=np.float32)),
-                o3d.core.Tensor(np.ascontiguousarray(t, dtype=np.uint32)),
-            )
+        scene = None if cache is None else cache.get("raycasting_scene")
+        if scene is None:
+            scene = o3d.t.geometry.RaycastingScene(nthreads=threads)
+            for v, t in meshes:
+                scene.add_triangles(
+                    o3d.core.Tensor(np.ascontiguousarray(v, dtype=np.float32)),
+                    o3d.core.Tensor(np.ascontiguousarray(t, dtype=np.uint32)),
+                )
+            if cache is not None:
+                cache["raycasting_scene"] = scene
         cand = _candidates(meshes, cam, grid, rot, origin)
         if len(cand):
             t, gid, c = _cast(scene, origin.astype(np.float32), dirs_w[cand], norm[cand], threads)

@@ -210,6 +210,8 @@ class SceneConfig:
     tray_inner_m: tuple[float, float] = (0.14, 0.24)  # inner side lengths (each side drawn alone)
     tray_wall_height_m: tuple[float, float] = (0.02, 0.06)
     tray_wall_thickness_m: tuple[float, float] = (0.003, 0.01)
+    # Camera poses rendered per settled scene (sim.views): frame i shows scene i // V from view i % V.
+    views_per_scene: int = 1
 
     def __post_init__(self) -> None:
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
@@ -252,6 +254,9 @@ class SceneConfig:
             raise ConfigError(f"scene.shape_weights must be non-negative with a positive sum, got {list(self.shape_weights)}")
         check_number("scene.library_fraction", self.library_fraction, 0.0, 1.0)
         check_range("scene.density_kg_m3", self.density_kg_m3, 1.0, 1e5)
+        v = self.views_per_scene
+        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1000:
+            raise ConfigError(f"scene.views_per_scene must be a whole number in [1, 1000], got {v!r}")
         self._check_families()
 
     def _check_families(self) -> None:
@@ -308,6 +313,7 @@ _FAMILY_DEFAULTS = {
         "tray_inner_m": (0.14, 0.24),
         "tray_wall_height_m": (0.02, 0.06),
         "tray_wall_thickness_m": (0.003, 0.01),
+        "views_per_scene": 1,
     }.items()
 }
 

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -234,8 +235,23 @@ def _psf(r: np.ndarray, amp: np.ndarray, hit: np.ndarray, sigma_px: float, k: fl
     return r_b, np.where(hit, amp_b, amp).astype(np.float32)
 
 
-def _cone(grid: RayGrid, half_angle_deg: float, width_deg: float) -> np.ndarray:
+@lru_cache(maxsize=16)
+def _off_axis_deg(grid: RayGrid) -> np.ndarray:
+    """Angle of each pixel's ray to the optical axis (cached per ray grid, i.e. per camera)."""
     theta = np.degrees(np.arctan(np.sqrt(np.maximum(grid.norm.astype(np.float64) ** 2 - 1.0, 0.0))))
+    theta.flags.writeable = False
+    return theta
+
+
+@lru_cache(maxsize=16)
+def _vignetting(grid: RayGrid, power: float) -> np.ndarray:
+    v = grid.norm ** (-power)
+    v.flags.writeable = False
+    return v
+
+
+def _cone(grid: RayGrid, half_angle_deg: float, width_deg: float) -> np.ndarray:
+    theta = _off_axis_deg(grid)
     x = np.clip((theta - half_angle_deg) / width_deg, -50, 50)
     return (1.0 / (1.0 + np.exp(x))).astype(np.float32)
 
@@ -256,7 +272,7 @@ def apply_sensor(
     hit = rr.ids != NO_HIT
     r = rr.r
     safe_r = np.where(hit, np.maximum(r, 1e-4), 1.0)
-    spatial = grid.norm ** (-cfg.vignetting_power) * _cone(grid, draw.cone_half_angle_deg, cfg.cone_width_deg)
+    spatial = _vignetting(grid, cfg.vignetting_power) * _cone(grid, draw.cone_half_angle_deg, cfg.cone_width_deg)
     amp = lut[rr.ids + 1] * rr.cos_inc * spatial * (cfg.range_ref_m / safe_r) ** 2
     med = float(np.median(amp[hit][::7])) if hit.any() else 1.0
     gain = draw.exposure / max(med, 1e-12)
