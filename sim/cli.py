@@ -15,6 +15,7 @@ from pathlib import Path
 from edge.cliutil import add_version, print_json, run
 from edge.errors import ConfigError
 from sim.dataset import simulate
+from sim.frames_range import parse_range
 
 __all__ = ["main"]
 
@@ -43,6 +44,14 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--config", help="JSON file overriding settings: {\"scene\": {...}, \"physics\": {...}, "
                    "\"sensor\": {...}, \"camera\": {\"fx\":..., \"distortion\": [k1,k2,p1,p2,k3]}}; see sim/scene.py, "
                    "sim/physics.py, sim/sensor.py for every key")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run the shards as Ray tasks, one shard a task: on the cluster at ADDRESS (e.g. 'auto' or "
+                        "'ray://head:10001'; --out must be a shared folder) or, without ADDRESS, on a local Ray with "
+                        "--workers CPUs. Same frames as --workers. Needs the extra: pip install 'depthseg[ray]'")
+    p.add_argument("--frames-range", metavar="A:B",
+                   help="make only the shards of frames [A, B) (A, B on shard boundaries; B may be --frames), for "
+                        "array jobs of a batch scheduler writing into one --out; a last run without it writes the "
+                        "complete manifest")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     return p
 
@@ -80,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
             config=_load_config(args.config),
             objects=args.objects,
             shard_frames=args.shard_frames,
+            ray=args.ray,
+            frames_range=None if args.frames_range is None else parse_range(args.frames_range),
             on_warning=lambda m: print(f"{PROG}: warning: {m}", file=sys.stderr),
         )
         if args.json:

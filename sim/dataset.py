@@ -139,6 +139,22 @@ def _check_manifest(out: Path, ident: dict[str, Any]) -> dict[str, Any]:
     return old
 
 
+def _stats_of_shard(path: Path) -> dict[str, Any]:
+    """Statistics of a complete shard, read back (its wall time is unknown)."""
+    import numpy as np
+
+    from edge.io import iter_frames
+
+    n = obj = inv = pix = 0
+    for f in iter_frames(path):
+        n += 1
+        obj += int(f.label.sum())
+        inv += int(np.count_nonzero(f.depth == 0))
+        pix += f.label.size
+    return {"file": path.name, "frames": n, "object_pixels": obj, "invalid_pixels": inv, "pixels": pix,
+            "seconds": None}
+
+
 def simulate(
     out: str | Path,
     frames: int,
@@ -149,8 +165,15 @@ def simulate(
     shard_frames: int = 100,
     on_warning: Callable[[str], None] | None = None,
     show_progress: bool | None = None,
+    ray: str | None = None,
+    frames_range: tuple[int, int] | None = None,
 ) -> dict[str, Any]:
-    """Generate (or finish) a dataset; returns the summary. All validation raises ConfigError."""
+    """Generate (or finish) a dataset; returns the summary. All validation raises ConfigError.
+
+    ``ray``: run the shards as Ray tasks ("" = a local Ray with ``workers`` CPUs, else a cluster
+    address; `sim.ray_runner`). ``frames_range`` (start, stop): make only the shards in it, for
+    array jobs; its bounds must fall on shard boundaries (see `sim.frames_range`).
+    """
     import multiprocessing as mp
 
     from sim.generate import FRAME_PERIOD_NS, SimConfig
@@ -166,6 +189,14 @@ def simulate(
         raise ConfigError(f"--seed must be a non-negative integer, got {seed}")
     config = config or SimConfig()
     out = Path(out)
+    if ray is not None:
+        from sim.ray_runner import import_ray
+
+        import_ray()  # before touching --out: a missing extra is a one-line error
+    if frames_range is not None:
+        from sim.frames_range import check_range
+
+        check_range(frames_range, int(frames), int(shard_frames))
     library_paths: list[str] | None = None
     skipped: list[str] = []
     if objects is not None:
@@ -188,15 +219,29 @@ def simulate(
     plan = plan_shards(int(frames), int(shard_frames))
     wanted = {shard_name(a, b) for a, b in plan}
     removed = 0
-    for p in out.iterdir():
-        if _TMP_RE.match(p.name):  # left by a killed run: never complete, regenerate
-            p.unlink(missing_ok=True)
-        elif _SHARD_RE.match(p.name) and p.name not in wanted:  # from a run of another length
-            p.unlink(missing_ok=True)
-            removed += 1
-    done = {p.name for p in out.iterdir() if p.name in wanted}
+    if frames_range is not None:  # an array job: touch only its own shards and temporary files
+        from sim.frames_range import in_range, tmp_in_range
+
+        plan = [(a, b) for a, b in plan if in_range((a, b), frames_range)]
+        for p in out.iterdir():
+            if tmp_in_range(p.name, frames_range):
+                p.unlink(missing_ok=True)
+    else:
+        for p in out.iterdir():
+            if _TMP_RE.match(p.name):  # left by a killed run: never complete, regenerate
+                p.unlink(missing_ok=True)
+            elif _SHARD_RE.match(p.name) and p.name not in wanted:  # from a run of another length
+                p.unlink(missing_ok=True)
+                removed += 1
+    done = {p.name for p in out.iterdir() if p.name in {shard_name(a, b) for a, b in plan}}
     todo = [(a, b) for a, b in plan if shard_name(a, b) not in done]
+    if frames_range is None:
+        from sim.frames_range import merge_part_stats
+
+        old = dict(old, shards=merge_part_stats(out, old.get("shards") or {}))
     shard_stats: dict[str, dict] = {k: v for k, v in (old.get("shards") or {}).items() if k in done}
+    for name in sorted(done - set(shard_stats)):  # completed, but the run died before recording it
+        shard_stats[name] = _stats_of_shard(out / name)
     manifest = {
         "tool": TOOL,
         **ident,
@@ -208,7 +253,15 @@ def simulate(
         "provenance": provenance(),  # depthseg version and git commit that wrote it
         "shards": shard_stats,
     }
-    _write_json_atomic(out / MANIFEST, manifest)
+    manifest_path = out / MANIFEST
+    if frames_range is not None:  # jobs of one array share manifest.json: each writes its own part
+        from sim.frames_range import part_name, write_identity_once
+
+        write_identity_once(out / MANIFEST, {k: v for k, v in manifest.items() if k != "shards"} | {"shards": {}},
+                            _write_json_atomic)
+        manifest_path = out / part_name(frames_range)
+        manifest["frames_range"] = list(frames_range)
+    _write_json_atomic(manifest_path, manifest)
 
     n_todo = sum(b - a for a, b in todo)
     t0 = time.perf_counter()
@@ -233,10 +286,17 @@ def simulate(
         def record(stats: dict[str, Any]) -> None:
             shard_stats[stats["file"]] = stats
             manifest["shards"] = shard_stats
-            _write_json_atomic(out / MANIFEST, manifest)
+            _write_json_atomic(manifest_path, manifest)
+            if ray is not None:
+                bar.update(stats["frames"])
 
         try:
-            if int(workers) == 1:  # in this process: no start-up cost for small runs and tests
+            if ray is not None:
+                from sim.ray_runner import run_shards
+
+                run_shards(todo, config.to_dict(), int(seed), library_paths, str(out), record,
+                           address=ray or None, workers=int(workers))
+            elif int(workers) == 1:  # in this process: no start-up cost for small runs and tests
                 _init_worker(config.to_dict(), int(seed), library_paths, str(out), q, pooled=False)
                 for task in todo:
                     record(_write_shard(task))
@@ -252,6 +312,10 @@ def simulate(
             stop.set()
             th.join(timeout=1.0)
             bar.close()
+        if frames_range is None:  # complete: what is left was written by killed (and retried) workers
+            from sim.frames_range import remove_orphan_tmp
+
+            remove_orphan_tmp(out)
     seconds = time.perf_counter() - t0
     pix = sum(s["pixels"] for s in shard_stats.values())
     summary = {
@@ -262,6 +326,8 @@ def simulate(
         "removed_stale_shards": removed,
         "shards": len(plan),
         "workers": int(workers),
+        **({"ray": ray or "local"} if ray is not None else {}),
+        **({"frames_range": list(frames_range)} if frames_range is not None else {}),
         "seed": int(seed),
         "seconds": round(seconds, 3),
         "frames_per_second": round(n_todo / seconds, 2) if n_todo and seconds > 0 else 0.0,
@@ -270,5 +336,5 @@ def simulate(
         "objects_skipped": len(skipped),
     }
     manifest["summary"] = summary
-    _write_json_atomic(out / MANIFEST, manifest)
+    _write_json_atomic(manifest_path, manifest)
     return summary

@@ -1,0 +1,113 @@
+"""Run the shards of ``depthseg-sim`` as Ray tasks (``--ray [ADDRESS]``), one shard a task.
+
+Why it needs nothing new for correctness: a shard is a pure function of (seed, config, its
+frame range) and appears under its final name only when complete (`edge.io.FrameWriter`),
+so where and in which order the tasks run does not matter, and a task that dies (worker killed,
+node lost) leaves at most a temporary file. Ray retries a task whose worker died
+(``max_retries``); when the retries are exhausted the run stops with one line, and running the
+same command again regenerates exactly the missing shards.
+
+On a cluster the output folder must be one shared file system (NFS, Lustre, a bucket mounted
+with a POSIX layer) seen under the same path by every node, and depthseg with its ``sim``
+extra must be installed on every node (or shipped with ``RAY_RUNTIME_ENV``/a Ray runtime
+environment). The driver needs no CPU of its own: it only submits tasks and writes the manifest.
+
+Ray is an optional extra (``pip install 'depthseg[ray]'``); it is imported only here.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from edge.errors import ConfigError, DataError
+
+__all__ = ["import_ray", "run_shards"]
+
+MAX_RETRIES = 3  # Ray re-runs a task whose worker died this many times before the run stops
+
+RAY_MISSING = "`ray` needs Ray, an optional extra: pip install 'depthseg[ray]' (or: pip install 'ray[default]')"
+
+
+def import_ray():
+    """The ``ray`` module, or a ConfigError naming the extra to install."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(RAY_MISSING) from None
+    return ray
+
+
+def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str) -> dict:
+    """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker)."""
+    from sim import dataset
+
+    key = (repr(config_dict), seed, tuple(library_paths or ()), out)
+    if dataset._W.get("ray_key") != key:
+        dataset._init_worker(config_dict, seed, library_paths, out, None, pooled=False)
+        dataset._W["ray_key"] = key
+    return dataset._write_shard(task)
+
+
+def _connect(ray, address: str | None, workers: int) -> bool:
+    """Connect to ``address`` or start a local Ray with ``workers`` CPUs; True if we started it."""
+    if ray.is_initialized():
+        return False
+    if address:
+        try:
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
+        except (ConnectionError, RuntimeError, ValueError) as exc:
+            raise ConfigError(f"`ray` {address}: cannot connect to a Ray cluster ({exc}); start one with 'ray start --head'") from None
+        return True
+    # Local: make this checkout importable by the workers whatever the current folder is.
+    root = str(Path(__file__).resolve().parents[1])
+    pp = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH", "")) if p)
+    ray.init(
+        num_cpus=int(workers),
+        include_dashboard=False,
+        log_to_driver=False,
+        configure_logging=False,
+        object_store_memory=100 * 1024 * 1024,  # tasks return small dicts; shards go to disk
+        runtime_env={"env_vars": {"PYTHONPATH": pp}},
+    )
+    return True
+
+
+def run_shards(
+    todo: Iterable[tuple[int, int]],
+    config_dict: dict,
+    seed: int,
+    library_paths: list[str] | None,
+    out: str | Path,
+    record: Callable[[dict[str, Any]], None],
+    address: str | None = None,
+    workers: int = 1,
+    max_retries: int | None = None,
+) -> None:
+    """Run one task per shard; ``record`` is called in the driver as each shard completes.
+
+    Raises DataError (after cancelling what is still running) when a task fails for good.
+    """
+    ray = import_ray()
+    started = _connect(ray, address, workers)
+    try:
+        task = ray.remote(num_cpus=1, max_retries=int(MAX_RETRIES if max_retries is None else max_retries))(_shard_task)
+        cfg_ref = ray.put(config_dict)
+        pending = [task.remote(t, cfg_ref, int(seed), library_paths, str(out)) for t in todo]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            try:
+                record(ray.get(done[0]))
+            except ray.exceptions.RayError as exc:
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                raise DataError(
+                    f"a Ray task failed ({type(exc).__name__}: {first}); complete shards are kept: "
+                    "run the same command again to finish"
+                ) from None
+    finally:
+        if started:
+            ray.shutdown()
