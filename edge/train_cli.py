@@ -19,6 +19,10 @@ examples:
   depthseg-train --train-dir a/ --val-dir b/ --encoder vgg16 --encoder-weights vgg16.pth \\
       --freeze-encoder --lr 1e-5 --lr-schedule constant              # the paper's setting
 
+Data-parallel on N processes (DDP: gloo on CPU, NCCL with CUDA; --batch-size stays the global batch;
+rank 0 alone writes OUT/; --resume works the same way):
+  torchrun --nproc-per-node 2 -m edge.train_cli --data data/train --out runs/ddp --threads 1 ...
+
 The best weights (lowest validation loss) are in OUT/best.pt; OUT/last.pt is the resumable
 state; OUT/log.csv and OUT/loss.png show the curves (like the paper's Fig. 4).
 """
@@ -65,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
     t.add_argument("--no-augment", action="store_true", help="disable flips")
     t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--threads", type=int, default=2, help="torch intra-op threads (default %(default)s)")
+    t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
+                   "under torchrun give each process its share of the cores)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     return p
@@ -109,7 +114,11 @@ def main(argv: list[str] | None = None) -> int:
                          batch_norm=args.batch_norm, extra_skip=args.extra_skip, standardize=args.standardize,
                          cues=cues)
         topics = {"depth_topic": args.depth_topic, "labels_topic": args.labels_topic}
-        with progress(desc="loading frames", unit="frame") as bar:
+        from edge.train.distributed import is_main_process
+
+        main_rank = is_main_process()  # under torchrun only rank 0 prints (edge.train.distributed)
+        quiet = None if main_rank else True
+        with progress(desc="loading frames", unit="frame", disable=quiet) as bar:
             if args.data:
                 allf = load_frames(args.data, limit=args.limit, progress=bar, **topics)
                 tr, va, _te = split_indices(len(allf), fr, args.seed)
@@ -125,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",
         }
         steps = -(-len(train_set) // cfg.batch_size)
-        bar = progress(total=steps, desc="epoch", unit="batch")
+        bar = progress(total=steps, desc="epoch", unit="batch", disable=quiet)
 
         def on_batch(b: int, loss: float) -> None:
             bar.update(1)
@@ -146,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
             "val_frames": len(val_set),
             "val_iou": next((h["val_iou"] for h in res.history if h["epoch"] == res.best_epoch), None),
         }
+        if not main_rank:
+            return 0
         if args.json:
             print_json(summary)
         else:

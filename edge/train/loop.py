@@ -30,6 +30,7 @@ from edge.io import atomic_write, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.train.checkpoint import read_checkpoint, save_checkpoint
 from edge.train.data import FrameSet, make_batch
+from edge.train.distributed import Dist
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
 __all__ = ["TrainConfig", "TrainResult", "train", "masked_bce", "plot_losses"]
@@ -79,12 +80,19 @@ def masked_bce(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -
 
 def _evaluate(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int) -> tuple[float, float]:
     """(mean validation loss per valid pixel, mean per-frame object IoU at 0.5)."""
+    total, count, iou_sum, n = _eval_sums(model, fs, meta, batch)
+    return total / max(count, 1.0), iou_sum / n if n else float("nan")
+
+
+def _eval_sums(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int,
+               device: torch.device | None = None) -> tuple[float, float, float, int]:
+    """(loss sum, valid pixels, IoU sum, frames): sums, so ranks of a DDP run can add theirs."""
     model.eval()
     total, count, ious = 0.0, 0.0, []
     with torch.no_grad():
         for s in range(0, len(fs), batch):
             idx = np.arange(s, min(s + batch, len(fs)))
-            x, t, m = (torch.from_numpy(a) for a in make_batch(fs, idx, meta))
+            x, t, m = (torch.from_numpy(a).to(device or "cpu") for a in make_batch(fs, idx, meta))
             logits = model(x)
             loss = nn.functional.binary_cross_entropy_with_logits(logits, t, reduction="none")
             total += float((loss * m).sum())
@@ -95,7 +103,7 @@ def _evaluate(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int) -> tuple[
             union = (pred | gt).sum(dim=(1, 2, 3)).double()
             ious.extend(torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(union)).tolist())
     model.train()
-    return total / max(count, 1.0), float(np.mean(ious)) if ious else float("nan")
+    return total, count, float(np.sum(ious)), len(ious)
 
 
 def _write_csv(path: Path, history: list[dict[str, Any]]) -> None:
@@ -191,6 +199,10 @@ def train(
             return cfg.lr
         return 0.5 * cfg.lr * (1 + math.cos(math.pi * epoch / cfg.epochs))
 
+    dist = Dist.from_env()  # torchrun: DDP across ranks (edge.train.distributed); one process: no-op
+    net = dist.wrap(model)
+    if dist.enabled:
+        training_info = dict(training_info or {}, ddp_world_size=dist.world)
     t0 = time.time()
     info = dict(training_info or {})
     epoch = start_epoch  # 1-based number of the last epoch run
@@ -208,18 +220,18 @@ def train(
         run_loss = 0.0
         for b in range(steps_per_epoch):
             idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-            x, t, m = (torch.from_numpy(a) for a in make_batch(
-                train_set, idx, meta, rng if cfg.augment else None))
-            loss = masked_bce(model(x), t, m)
+            x, t, m = dist.local(make_batch(train_set, idx, meta, rng if cfg.augment else None))
+            loss, lv = dist.loss(net(x), t, m)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            lv = float(loss.detach())
             batch_losses.append(lv)
             run_loss += lv
-            if on_batch:
+            if on_batch and dist.is_main:
                 on_batch(b, lv)
-        val_loss, val_iou = _evaluate(model, val_set, meta, cfg.batch_size)
+        vset = val_set.subset(dist.shard(len(val_set))) if dist.enabled else val_set
+        vs = dist.all_sum(list(_eval_sums(model, vset, meta, cfg.batch_size, dist.device)))
+        val_loss, val_iou = vs[0] / max(vs[1], 1.0), vs[2] / vs[3] if vs[3] else float("nan")
         minutes = elapsed_before + (time.time() - t0) / 60
         row = {
             "epoch": epoch,
@@ -239,22 +251,25 @@ def train(
                    epochs_run=epoch, minutes=round(minutes, 2), train_frames=len(train_set),
                    val_frames=len(val_set), trainable_params=count_parameters(model, trainable_only=True))
         m_meta = meta.with_(training=rec)
-        if improved:
-            save_checkpoint(out / "best.pt", model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss,
-                            history=history)
-        save_checkpoint(last, model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss, best_epoch=best_epoch,
-                        history=history, optimizer=opt.state_dict(), batch_losses=batch_losses, minutes=minutes)
-        _write_csv(out / "log.csv", history)
-        plot_losses(history, batch_losses, out / "loss.png")
-        if on_epoch:
-            on_epoch(row)
+        if dist.is_main:  # rank 0 alone writes
+            if improved:
+                save_checkpoint(out / "best.pt", model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss,
+                                history=history)
+            save_checkpoint(last, model, m_meta, epoch=epoch, epoch_base=1, best_val_loss=best_loss,
+                            best_epoch=best_epoch, history=history, optimizer=opt.state_dict(),
+                            batch_losses=batch_losses, minutes=minutes)
+            _write_csv(out / "log.csv", history)
+            plot_losses(history, batch_losses, out / "loss.png")
+            if on_epoch:
+                on_epoch(row)
         if cfg.max_minutes is not None:
             per_epoch = (time.time() - t0) / 60 / (epoch - start_epoch)
-            if minutes + per_epoch > cfg.max_minutes:
+            if dist.agree(minutes + per_epoch > cfg.max_minutes):
                 break
     # the final best.pt carries the complete history and the final recipe facts
     best = out / "best.pt"
-    if best.exists():
+    dist.close()  # waits for every rank
+    if best.exists() and dist.is_main:
         blob = read_checkpoint(best)
         bm = ModelMeta.from_dict(blob["meta"])
         rec = dict(bm.training, epochs_run=epoch, minutes=round(elapsed_before + (time.time() - t0) / 60, 2))
