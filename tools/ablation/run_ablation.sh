@@ -5,6 +5,9 @@
 # (the same config with the old blurred-edge fit, tools/ablation/train_blurred_edges.json):
 #   .venv/bin/depthseg-sim --out data/train_blur --frames 3000 --seed 1 --workers 2 \
 #       --config tools/ablation/train_blurred_edges.json
+# data/train_v8 (issue 13, 8 views per settled scene, 375 scenes):
+#   .venv/bin/depthseg-sim --out data/train_v8 --frames 3000 --seed 1 --workers 2 --shard-frames 80 \
+#       --config tools/ablation/train_views8.json
 # Measured: ~8 min a row on this 2-core machine when nothing else runs.
 #   bash tools/ablation/run_ablation.sh [ROW ...]      # default: all rows
 set -euo pipefail
@@ -25,6 +28,7 @@ for r in $ROWS; do
     z_w125) row z_w125 data/train4 0.125 none ;;
     zh_w125_blur) row zh_w125_blur data/train_blur 0.125 height ;;
     zh_w25) row zh_w25 data/train4 0.25 height ;;
+    zh_w125_v8) row zh_w125_v8 data/train_v8 0.125 height ;;  # issue 13: 8 camera views per settled scene
     *) echo "unknown row $r" >&2; exit 2 ;;
   esac
 done
