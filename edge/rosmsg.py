@@ -17,6 +17,7 @@ import numpy as np
 from edge.errors import McapDataError
 
 __all__ = [
+    "CdrReader",
     "IMAGE_MSGDEF",
     "CAMERA_INFO_MSGDEF",
     "IMAGE_TYPE",
@@ -138,7 +139,9 @@ class _W:
         return b"".join(self.parts)
 
 
-class _R:
+class CdrReader:
+    """Bounds-checked CDR reader over a message buffer: every read raises `McapDataError` on truncation."""
+
     def __init__(self, buf: bytes | memoryview, what: str) -> None:
         self.buf = memoryview(buf)
         self.what = what
@@ -179,6 +182,20 @@ class _R:
         s = bytes(self.buf[self.pos : self.pos + n]).rstrip(b"\x00").decode(errors="replace")
         self.pos += n
         return s
+
+    def header(self) -> tuple[int, str]:
+        """std_msgs/Header: (stamp in ns, frame_id)."""
+        sec = self.i32()
+        nsec = self.u32()
+        return sec * 1_000_000_000 + nsec, self.string()
+
+    def blob(self) -> memoryview:
+        """A length-prefixed byte sequence (uint8[]), without copying it."""
+        n = self.u32()
+        self._need(n)
+        data = self.buf[self.pos : self.pos + n]
+        self.pos += n
+        return data
 
     def f64s(self, n: int | None) -> list[float]:
         if n is None:
@@ -224,19 +241,14 @@ def encode_image(stamp_ns: int, frame_id: str, array: np.ndarray, encoding: str)
 
 def decode_image(buf: bytes | memoryview, what: str = "Image") -> RosImage:
     """Parse a CDR sensor_msgs/msg/Image without copying its pixel data."""
-    r = _R(buf, what)
-    sec = r.i32()
-    nsec = r.u32()
-    frame_id = r.string()
+    r = CdrReader(buf, what)
+    stamp_ns, frame_id = r.header()
     h = r.u32()
     w = r.u32()
     enc = r.string()
     big = r.u8()
     step = r.u32()
-    n = r.u32()
-    r._need(n)
-    data = r.buf[r.pos : r.pos + n]
-    return RosImage(sec * 1_000_000_000 + nsec, frame_id, h, w, enc, big, step, data)
+    return RosImage(stamp_ns, frame_id, h, w, enc, big, step, r.blob())
 
 
 def image_to_array(img: RosImage, what: str = "Image") -> np.ndarray:
@@ -306,15 +318,13 @@ def encode_string(text: str) -> bytes:
 
 
 def decode_string(buf: bytes | memoryview, what: str = "String") -> str:
-    return _R(buf, what).string()
+    return CdrReader(buf, what).string()
 
 
 def decode_camera_info(buf: bytes | memoryview, what: str = "CameraInfo") -> dict:
     """The fields a depth user needs: size, K (fx, fy, cx, cy) and distortion."""
-    r = _R(buf, what)
-    r.i32()
-    r.u32()
-    frame_id = r.string()
+    r = CdrReader(buf, what)
+    _stamp, frame_id = r.header()
     h = r.u32()
     w = r.u32()
     model = r.string()

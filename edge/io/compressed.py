@@ -42,14 +42,10 @@ class CompressedImage:
 
 def decode_compressed_image(buf: bytes | memoryview, what: str = "CompressedImage") -> CompressedImage:
     """Parse a CDR sensor_msgs/msg/CompressedImage without copying its data."""
-    r = rosmsg._R(buf, what)
-    sec = r.i32()
-    nsec = r.u32()
-    frame_id = r.string()
+    r = rosmsg.CdrReader(buf, what)
+    stamp_ns, frame_id = r.header()
     fmt = r.string()
-    n = r.u32()
-    r._need(n)
-    return CompressedImage(sec * 1_000_000_000 + nsec, frame_id, fmt, r.buf[r.pos : r.pos + n])
+    return CompressedImage(stamp_ns, frame_id, fmt, r.blob())
 
 
 def decompress_depth(msg: CompressedImage, what: str) -> tuple[np.ndarray, str]:
