@@ -8,8 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
+from test_train import _frames
 
 from edge.io import FrameWriter
 from edge.train.checkpoint import read_checkpoint
@@ -20,20 +20,11 @@ ARGS = ["--encoder", "vgg11", "--batch-norm", "--width", "0.0625", "--batch-size
 
 
 def _write(path: Path, n: int, seed: int) -> None:
-    """Tilted floor with raised boxes (label 1) and dead corners, 40 x 56."""
-    rng = np.random.default_rng(seed)
-    h, w = 40, 56
-    xx = np.mgrid[0:h, 0:w][1]
+    """The frames of `test_train._frames` (tilted floor, raised boxes, dead corners) as a recording."""
+    fs = _frames(n, seed)
     with FrameWriter(path) as fw:
         for i in range(n):
-            d = 0.30 + 0.0005 * xx + rng.normal(0, 0.001, (h, w))
-            lab = np.zeros((h, w), np.uint8)
-            for _ in range(rng.integers(1, 3)):
-                y, x = rng.integers(0, h - 12), rng.integers(0, w - 12)
-                d[y : y + 10, x : x + 10] -= 0.05
-                lab[y : y + 10, x : x + 10] = 1
-            d[:3, :3] = 0.0
-            fw.write(i * 1000, d.astype(np.float32), lab, (50.0, 50.0, 28.0, 20.0))
+            fw.write(i * 1000, fs.depth[i], fs.label[i], (50.0, 50.0, 28.0, 20.0))
 
 
 def _run(cmd: list[str]) -> None:
