@@ -15,6 +15,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from edge.errors import DataError
+
 __all__ = ["atomic_path", "atomic_write", "write_bytes_atomic", "write_json_atomic"]
 
 
@@ -37,6 +39,8 @@ def atomic_write(path: str | Path, fsync: bool = False) -> Iterator[Path]:
         The temporary path; the caller writes the whole file there.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():
+        raise DataError(f"{path} exists and is not a regular file (a directory, FIFO or device); give a new file name")
     tmp = atomic_path(path)
     try:
         yield tmp
