@@ -22,12 +22,18 @@ RUN=${RUN:-runs/default3}
 FRAMES=${FRAMES:-10000}
 EPOCHS=${EPOCHS:-12}
 MINUTES=${MINUTES:-55}
+CONFIG=${CONFIG:-tools/default_sim_config.json}
+INSTALL=${INSTALL:-1}  # 0: train a candidate in $RUN without installing it as the default
 start=$(date +%s)
-$BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config tools/default_sim_config.json
+$BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config "$CONFIG"
 $BIN/depthseg-train --data "$DATA" --out "$RUN" --encoder vgg11 --batch-norm --width 0.125 \
   --in-channels 3 --cues height --standardize robust --extra-skip --split 0.85,0.1,0.05 --epochs "$EPOCHS" --batch-size 16 --lr 1e-3 --lr-schedule cosine \
   --patience 6 --max-minutes "$MINUTES" --seed 0 --threads 2
-cp "$RUN/best.pt" edge/models/default.pt
-$BIN/depthseg-export --model edge/models/default.pt --single-channel --out edge/models/default.onnx --data "$DATA"
+if [ "$INSTALL" = 1 ]; then
+  cp "$RUN/best.pt" edge/models/default.pt
+  $BIN/depthseg-export --model edge/models/default.pt --single-channel --out edge/models/default.onnx --data "$DATA"
+else
+  $BIN/depthseg-export --model "$RUN/best.pt" --single-channel --out "$RUN/model.onnx" --data "$DATA"
+fi
 end=$(date +%s)
 echo "train_default: done in $(( (end - start) / 60 )) min"
