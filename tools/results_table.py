@@ -43,6 +43,11 @@ DATASETS: list[tuple[str, str, list[str]]] = [
         for f in ("thin", "table_edge", "tilted", "curved", "tray", "stacked")
     ],
     (
+        "own sim, labelled by the real capture's rule (> 10 mm above the floor plane)",
+        "data/test_default_geo10.mcap",
+        [str(BIN / "python"), "tools/relabel_geometric.py", "data/test_default", "data/test_default_geo10.mcap"],
+    ),
+    (
         "BlenSor scans (the 10 in ../shared)",
         "data/blensor.mcap",
         [str(BIN / "depthseg-sim"), "import", "blensor", str(SHARED / "blensor"), "--out", "data/blensor.mcap"],
