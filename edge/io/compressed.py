@@ -25,7 +25,7 @@ from edge import rosmsg
 from edge.errors import McapDataError
 
 __all__ = ["COMPRESSED_IMAGE_TYPES", "CompressedImage", "decode_compressed_image", "decompress_depth",
-           "encode_compressed_depth"]
+           "encode_compressed_depth", "png_size"]
 
 COMPRESSED_IMAGE_TYPES = frozenset({"sensor_msgs/msg/CompressedImage", "sensor_msgs/CompressedImage"})
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -48,8 +48,22 @@ def decode_compressed_image(buf: bytes | memoryview, what: str = "CompressedImag
     return CompressedImage(stamp_ns, frame_id, fmt, r.blob())
 
 
-def decompress_depth(msg: CompressedImage, what: str) -> tuple[np.ndarray, str]:
-    """(H x W array, pixel encoding '16UC1' or '32FC1') of a compressed depth message."""
+def png_size(png: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk, without decoding; None when there is no IHDR."""
+    if len(png) < 24 or png[:8] != PNG_MAGIC or png[12:16] != b"IHDR":
+        return None
+    w, h = struct.unpack_from(">II", png, 16)
+    return w, h
+
+
+def decompress_depth(
+    msg: CompressedImage, what: str, max_frame: tuple[int, int] | None = None
+) -> tuple[np.ndarray, str]:
+    """(H x W array, pixel encoding '16UC1' or '32FC1') of a compressed depth message.
+
+    ``max_frame`` (width, height): a PNG claiming more is refused from its header, before
+    decoding (a few kB of PNG can hold a 65535 x 65535 image of zeros).
+    """
     import cv2
 
     fmt = msg.format.strip()
@@ -68,6 +82,14 @@ def decompress_depth(msg: CompressedImage, what: str) -> tuple[np.ndarray, str]:
         raise McapDataError(
             f"{what}: CompressedImage format '{fmt}' holds no PNG (first bytes {raw[:4]!r}); depth must be "
             "compressedDepth png or a 16-bit png"
+        )
+    size = png_size(png)
+    if size is None:
+        raise McapDataError(f"{what}: the PNG of this compressed depth image has no IHDR header: corrupt")
+    if max_frame is not None and (size[0] > max_frame[0] or size[1] > max_frame[1]):
+        raise McapDataError(
+            f"{what}: frame is {size[0]}x{size[1]}, larger than the {max_frame[0]}x{max_frame[1]} limit "
+            "(`max_frame`); raise the limit if the camera really is that large"
         )
     img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from edge import rosmsg
+from edge.errors import McapDataError
 
 __all__ = [
     "TOPIC_DEPTH",
@@ -61,6 +62,15 @@ class Frame:
 
 
 def decode_scene(message_encoding: str, data: bytes) -> dict[str, Any]:
-    """The scene dict of a ``/depthseg/scene`` message (std_msgs/String CDR, or JSON in older files)."""
-    text = rosmsg.decode_string(data, TOPIC_SCENE) if message_encoding == "cdr" else bytes(data).decode()
-    return json.loads(text)
+    """The scene dict of a ``/depthseg/scene`` message (std_msgs/String CDR, or JSON in older files).
+
+    Raises `McapDataError` (one line) when the message is not a JSON object.
+    """
+    try:
+        text = rosmsg.decode_string(data, TOPIC_SCENE) if message_encoding == "cdr" else bytes(data).decode()
+        scene = json.loads(text)
+    except (ValueError, RecursionError) as exc:  # bad UTF-8, bad JSON, nesting too deep
+        raise McapDataError(f"{TOPIC_SCENE}: scene message is not JSON ({type(exc).__name__}: {str(exc)[:120]})") from None
+    if not isinstance(scene, dict):
+        raise McapDataError(f"{TOPIC_SCENE}: scene message is a JSON {type(scene).__name__}, not an object")
+    return scene

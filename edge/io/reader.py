@@ -32,6 +32,8 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import logging
+import math
 import os
 import re
 import struct
@@ -50,6 +52,7 @@ from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
 from edge.io.bags import is_bag, open_bag
 from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
 from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame, decode_scene
+from edge.io.paths import check_input_file
 
 __all__ = [
     "DepthStream",
@@ -80,12 +83,29 @@ _NOT_DEPTH_TOKENS = frozenset(
 _DECODABLE = {"cdr": "ROS 2 CDR", "protobuf": "protobuf", "json": "JSON"}
 
 PEEK_BYTES = 64 * 1024 * 1024  # how far to look for the first message of each image topic
-MAX_CHUNK_BYTES = 1 << 30  # a chunk claiming more than this decompressed is corrupt, not data
+# A chunk is decompressed only up to the size its header declares, and never beyond this bound
+# (raised with the frame limit: twice the largest allowed 64FC1 frame): a few kB of zeros can
+# claim to be a gigabyte. Real recorders write chunks of a few MB.
+MAX_CHUNK_BYTES = 256 * 1024 * 1024
+DEFAULT_MAX_FRAME = (4096, 4096)  # width, height: generous for any depth camera (ToF: 224x172 .. 1280x720)
+MM_MEDIAN_M = 10.0  # a 32FC1 frame whose valid median is farther than this is not metres from a ToF camera
 DEFAULT_WINDOW = 32  # frames a depth frame may wait for its label
 DEFAULT_TOLERANCE_NS = 1_000_000  # 1 ms: labels share the depth header stamp in practice
 EXTRA_TOPICS = {"clean": TOPIC_CLEAN, "scene": TOPIC_SCENE}  # what the simulator records beside each frame
 
 MessageHook = Callable[[Schema | None, Channel, Message], None]
+_log = logging.getLogger(__name__)
+
+
+def _check_max_frame(max_frame: Any) -> tuple[int, int]:
+    try:
+        w, h = max_frame
+        ok = all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (w, h))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ConfigError(f"`max_frame` must be (width, height) in pixels, two positive integers; got {max_frame!r}")
+    return int(w), int(h)
 
 
 @dataclass
@@ -178,8 +198,14 @@ def _walk(
     channels: dict[int, Channel],
     header_out: list[Header] | None = None,
     position: list[int] | None = None,
+    chunk_limit: int = MAX_CHUNK_BYTES,
 ) -> Iterator[tuple[Schema | None, Channel, Message]]:
-    """Messages in file order; `_Damage` at the first record that cannot be read."""
+    """Messages in file order; `_Damage` at the first record that cannot be read.
+
+    A schema or channel id defined twice with different content is damage too: following the
+    second definition would route one topic's messages into another (a String into an Image
+    channel); identical repeats (one per chunk, and the summary's) are normal.
+    """
     with open(path, "rb") as raw:
         fh = _ClampedFile(raw, size)
         reader = StreamReader(fh, emit_chunks=True, validate_crcs=True, record_size_limit=size)
@@ -197,12 +223,17 @@ def _walk(
             if position is not None:
                 position[0] = fh.pos
             if isinstance(rec, Chunk):
-                if rec.uncompressed_size > MAX_CHUNK_BYTES:
-                    raise _Damage(start, f"chunk claims {rec.uncompressed_size} bytes uncompressed: corrupt")
+                data = _decompress_chunk(rec, start, chunk_limit)
                 try:
-                    inner = breakup_chunk(rec, validate_crc=True)
+                    inner = breakup_chunk(
+                        Chunk(compression="", data=data, message_end_time=rec.message_end_time,
+                              message_start_time=rec.message_start_time, uncompressed_crc=rec.uncompressed_crc,
+                              uncompressed_size=len(data)),
+                        validate_crc=True,
+                    )
                 except Exception as exc:
                     raise _Damage(start, "chunk " + _describe_exc(exc)) from None
+                del data
             else:
                 inner = (rec,)
             for r in inner:
@@ -212,11 +243,85 @@ def _walk(
                         raise _Damage(start, f"message refers to channel id {r.channel_id}, which is never defined")
                     yield (schemas.get(ch.schema_id) if ch.schema_id else None), ch, r
                 elif isinstance(r, Schema):
-                    schemas[r.id] = r
+                    _define(schemas, r, start)
                 elif isinstance(r, Channel):
-                    channels[r.id] = r
+                    _define(channels, r, start)
                 elif isinstance(r, Header) and header_out is not None:
                     header_out.append(r)
+
+
+
+def _describe_record(r: Schema | Channel) -> str:
+    if isinstance(r, Schema):
+        return f"'{r.name}' ({r.encoding})"
+    return f"{r.topic} ({r.message_encoding}, schema {r.schema_id})"
+
+
+def _define(table: dict, rec: Schema | Channel, offset: int) -> None:
+    """Record a schema or channel; a conflicting redefinition of its id is `_Damage`."""
+    old = table.get(rec.id)
+    if old is not None:
+        if isinstance(rec, Schema):
+            same = (old.name, old.encoding, bytes(old.data)) == (rec.name, rec.encoding, bytes(rec.data))
+        else:
+            same = (old.topic, old.message_encoding, old.schema_id) == (rec.topic, rec.message_encoding, rec.schema_id)
+        if not same:
+            kind = "schema" if isinstance(rec, Schema) else "channel"
+            raise _Damage(
+                offset, f"{kind} id {rec.id} is redefined: {_describe_record(old)} became {_describe_record(rec)}; "
+                "a recording gives each id one meaning"
+            )
+        return
+    table[rec.id] = rec
+
+
+def _decompress_chunk(chunk: Chunk, offset: int, limit: int) -> bytes:
+    """The chunk's records, decompressed by streaming and never past the size its header declares.
+
+    The header is not trusted: decompression stops one byte past the declared size (then the
+    chunk is damage), so a compression bomb costs at most ``min(declared, limit)`` bytes.
+    """
+    declared = chunk.uncompressed_size
+    if declared > limit:
+        raise _Damage(
+            offset, f"chunk claims {declared} bytes uncompressed, more than the {limit >> 20} MiB limit: corrupt"
+        )
+    comp = chunk.compression
+    try:
+        if comp == "":
+            return chunk.data
+        if comp == "zstd":
+            import zstandard
+
+            parts: list[bytes] = []
+            got = 0
+            with zstandard.ZstdDecompressor().stream_reader(chunk.data, read_across_frames=True) as r:
+                while got <= declared:
+                    piece = r.read(declared + 1 - got)
+                    if not piece:
+                        break
+                    parts.append(piece)
+                    got += len(piece)
+            data = parts[0] if len(parts) == 1 else b"".join(parts)
+            parts.clear()
+        elif comp == "lz4":
+            import lz4.frame
+
+            d = lz4.frame.LZ4FrameDecompressor()
+            data = d.decompress(chunk.data, max_length=declared + 1)
+            if len(data) <= declared and not d.eof:
+                raise _Damage(offset, "lz4 chunk data ends before its frame does: truncated or corrupt")
+        else:
+            raise _Damage(offset, f"chunk compression '{comp[:40]}' is not supported (zstd, lz4 or none)")
+    except _Damage:
+        raise
+    except Exception as exc:  # zstd/lz4 errors on corrupt data
+        raise _Damage(offset, f"{comp} chunk data is corrupt: it does not decompress ({type(exc).__name__}: {str(exc)[:120]})") from None
+    if len(data) > declared:
+        raise _Damage(offset, f"{comp} chunk decompresses to more than the {declared} bytes its header declares: corrupt")
+    if len(data) < declared:
+        raise _Damage(offset, f"{comp} chunk decompresses to {len(data)} bytes, its header declares {declared}: corrupt")
+    return data
 
 
 # ---------------------------------------------------------------------------- decoders
@@ -226,18 +331,34 @@ def _ros_image(data: bytes, what: str) -> rosmsg.RosImage:
     return rosmsg.decode_image(data, what=what)
 
 
+def _json_int(d: dict, key: str, what: str, default: int | None = None) -> int:
+    """A JSON field that must be a whole number (1e400 parses as inf, "12" is a string: both refused)."""
+    v = d.get(key, default)
+    if v is None:
+        raise McapDataError(f"{what}: not a foxglove RawImage JSON message (no '{key}')")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v):
+        raise McapDataError(f"{what}: RawImage JSON field '{key}' must be a whole number, got {str(v)[:40]}")
+    return int(v)
+
+
 def _json_image(data: bytes, what: str) -> rosmsg.RosImage:
     try:
         d = json.loads(bytes(data))
+        if not isinstance(d, dict):
+            raise TypeError(f"top level is a {type(d).__name__}, not an object")
         ts = d.get("timestamp") or {}
-        sec = int(ts.get("sec", 0))
-        nsec = int(ts.get("nsec", ts.get("nanosec", 0)))
+        if not isinstance(ts, dict):
+            raise TypeError("'timestamp' is not an object")
+        sec = _json_int(ts, "sec", what, 0)
+        nsec = _json_int(ts, "nsec", what, ts.get("nanosec", 0))
+        h, w, step = (_json_int(d, k, what) for k in ("height", "width", "step"))
+        if not isinstance(d.get("data"), str):
+            raise KeyError("data")
         raw = base64.b64decode(d["data"], validate=True)
         return rosmsg.RosImage(
-            sec * 1_000_000_000 + nsec, str(d.get("frame_id", "")), int(d["height"]), int(d["width"]),
-            str(d["encoding"]), 0, int(d["step"]), memoryview(raw),
+            sec * 1_000_000_000 + nsec, str(d.get("frame_id", "")), h, w, str(d["encoding"]), 0, step, memoryview(raw),
         )
-    except (ValueError, KeyError, TypeError, AttributeError, binascii.Error) as exc:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError, binascii.Error) as exc:
         raise McapDataError(f"{what}: not a foxglove RawImage JSON message ({type(exc).__name__}: {exc})") from None
 
 
@@ -270,30 +391,84 @@ def _protobuf_image(decode, data: bytes, what: str) -> rosmsg.RosImage:
         raise McapDataError(f"{what}: not a foxglove.RawImage protobuf message ({type(exc).__name__}: {exc})") from None
 
 
+_CV_DISTORTION_LENGTHS = (4, 5, 8, 12, 14)  # what OpenCV's undistortion accepts
+
+
+def _info_number(v: Any, name: str, what: str) -> float:
+    if isinstance(v, (bool, str, bytes)) or v is None:
+        raise McapDataError(f"{what}: camera calibration {name} must be a number, got {str(v)[:40]!r}")
+    try:
+        f = float(v)
+    except (TypeError, ValueError, OverflowError):
+        raise McapDataError(f"{what}: camera calibration {name} must be a number, got {str(v)[:40]!r}") from None
+    if not math.isfinite(f):
+        raise McapDataError(f"{what}: camera calibration {name} is {f}, not a finite number")
+    return f
+
+
+def _checked_info(info: dict[str, Any], k: Any, d: Any, what: str) -> dict[str, Any]:
+    """CameraInfo fields as numbers a consumer can use, or one `McapDataError` line.
+
+    K must be 9 finite numbers (a string is not a list of digits). The distortion is padded with
+    zeros to the next length OpenCV understands (ROS plumb_bob order k1 k2 p1 p2 k3: the missing
+    higher terms are zero), so a CameraInfo with 3 coefficients undistorts instead of crashing.
+    """
+    if isinstance(k, (str, bytes)) or not hasattr(k, "__len__") or len(k) != 9:
+        raise McapDataError(f"{what}: camera calibration K must be 9 numbers, got {str(k)[:60]!r}")
+    if isinstance(d, (str, bytes)) or not hasattr(d, "__len__"):
+        raise McapDataError(f"{what}: camera calibration D must be a list of numbers, got {str(d)[:60]!r}")
+    kk = [_info_number(v, "K", what) for v in k]
+    dd = [_info_number(v, "D", what) for v in d]
+    if len(dd) > _CV_DISTORTION_LENGTHS[-1]:
+        raise McapDataError(f"{what}: {len(dd)} distortion coefficients; at most {_CV_DISTORTION_LENGTHS[-1]} exist")
+    if dd:
+        dd += [0.0] * (min(n for n in _CV_DISTORTION_LENGTHS if n >= len(dd)) - len(dd))
+    h, w = (_info_number(info.get(x, 0), x, what) for x in ("height", "width"))
+    if h < 0 or w < 0 or h != int(h) or w != int(w):
+        raise McapDataError(f"{what}: camera calibration size {w}x{h} is not a whole number of pixels")
+    return {
+        "frame_id": str(info.get("frame_id", "")), "height": int(h), "width": int(w),
+        "distortion_model": str(info.get("distortion_model", "")), "d": dd,
+        "fx": kk[0], "fy": kk[4], "cx": kk[2], "cy": kk[5],
+    }
+
+
 def _camera_info(decode_obj, data: bytes, what: str) -> dict[str, Any]:
-    if decode_obj is None:
-        return rosmsg.decode_camera_info(data, what=what)
     kind, dec = decode_obj
+    if kind == "cdr":
+        ci = rosmsg.decode_camera_info(data, what=what)
+        return _checked_info(ci, [ci["fx"], 0, ci["cx"], 0, ci["fy"], ci["cy"], 0, 0, 1], ci["d"], what)
     try:
         m = json.loads(bytes(data)) if kind == "json" else dec(data)
+        if kind == "json" and not isinstance(m, dict):
+            raise TypeError(f"top level is a {type(m).__name__}, not an object")
         get = (lambda k, d=None: m.get(k, d)) if kind == "json" else (lambda k, d=None: getattr(m, k, d))
-        k = list(get("K") or get("k") or [])
-        return {
-            "frame_id": get("frame_id", ""), "height": int(get("height", 0)), "width": int(get("width", 0)),
-            "distortion_model": get("distortion_model", ""), "d": list(get("D") or get("d") or []),
-            "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5],
-        }
+        k = get("K") or get("k") or []
+        d = get("D") or get("d") or []
+        fields = {x: get(x, 0 if x in ("height", "width") else "") for x in ("frame_id", "height", "width", "distortion_model")}
     except DepthsegError:
         raise
     except Exception as exc:
         raise McapDataError(f"{what}: unreadable camera calibration ({type(exc).__name__}: {exc})") from None
+    return _checked_info(fields, k if kind == "json" else list(k), d if kind == "json" else list(d), what)
+
+
+def check_frame_size(width: int, height: int, max_frame: tuple[int, int], what: str) -> None:
+    """Refuse a frame larger than ``max_frame`` (width, height) before any pixel is allocated."""
+    mw, mh = max_frame
+    if width > mw or height > mh:
+        raise McapDataError(
+            f"{what}: frame is {width}x{height}, larger than the {mw}x{mh} limit (`max_frame`); "
+            "raise the limit if the camera really is that large"
+        )
 
 
 class _ChannelDecoder:
     """Turns the raw bytes of one channel into a `rosmsg.RosImage` (or CameraInfo dict); built once per channel."""
 
-    def __init__(self, schema: Schema | None, channel: Channel) -> None:
+    def __init__(self, schema: Schema | None, channel: Channel, max_frame: tuple[int, int] = DEFAULT_MAX_FRAME) -> None:
         self.topic = channel.topic
+        self.max_frame = max_frame
         enc = channel.message_encoding
         name = schema.name if schema else ""
         if enc not in _DECODABLE:
@@ -317,24 +492,26 @@ class _ChannelDecoder:
         self.compressed = name in COMPRESSED_IMAGE_TYPES
 
     def image(self, data: bytes, what: str) -> rosmsg.RosImage:
+        """The image header and pixel bytes; its size is checked against ``max_frame`` first."""
         if self.enc == "cdr" and self.compressed:
             c = decode_compressed_image(data, what)
-            arr, pix = decompress_depth(c, what)
+            arr, pix = decompress_depth(c, what, max_frame=self.max_frame)
             h, w = arr.shape
             return rosmsg.RosImage(c.stamp_ns, c.frame_id, h, w, pix, 0, w * arr.itemsize, memoryview(arr.tobytes()))
         if self.enc == "cdr":
-            return _ros_image(data, what)
-        if self.enc == "json":
-            return _json_image(data, what)
-        return _protobuf_image(self._proto, data, what)
+            img = _ros_image(data, what)
+        elif self.enc == "json":
+            img = _json_image(data, what)
+        else:
+            img = _protobuf_image(self._proto, data, what)
+        check_frame_size(img.width, img.height, self.max_frame, what)
+        return img
 
     def info(self, data: bytes, what: str) -> dict[str, Any]:
-        if self.enc == "cdr":
-            return rosmsg.decode_camera_info(data, what=what)
         return _camera_info((self.enc, self._proto), data, what)
 
 
-def _depth_metres(img: rosmsg.RosImage, what: str) -> np.ndarray:
+def _depth_metres(img: rosmsg.RosImage, what: str, depth_scale: float = 1.0) -> np.ndarray:
     scale = DEPTH_ENCODINGS.get(img.encoding)
     if img.encoding not in rosmsg.BYTES_PER_PIXEL:
         raise McapDataError(
@@ -347,9 +524,19 @@ def _depth_metres(img: rosmsg.RosImage, what: str) -> np.ndarray:
             f"{what}: pixel encoding '{img.encoding}' is not a depth image; expected 32FC1 (metres) or "
             "16UC1 (millimetres); choose the depth topic with `depth_topic`"
         )
+    scale *= depth_scale
     if scale == 1.0:
         return arr.astype(np.float32, copy=False)
     return arr.astype(np.float32) * np.float32(scale)
+
+
+def _valid_median(depth: np.ndarray) -> float:
+    """Median of the valid (finite, > 0) depths of a subsample of ~4096 pixels; NaN without any."""
+    h, w = depth.shape
+    stride = max(1, int(math.sqrt(h * w / 4096)))
+    sub = depth[::stride, ::stride]
+    v = sub[np.isfinite(sub) & (sub > 0)]
+    return float(np.median(v)) if v.size else math.nan
 
 
 def _label_mask(img: rosmsg.RosImage, what: str) -> np.ndarray:
@@ -537,6 +724,7 @@ class DepthStream:
     fields seen, or None), ``frame_count`` (from the summary, None when unknown), ``profile``.
     ``message_hook`` (set by a writer) sees every message of the file in order during iteration.
     After an iteration: ``frames_read`` and ``damage`` (None, or the message of the error raised).
+    ``max_frame``, ``depth_scale`` and ``on_warning``: see `open_depth_stream`.
     """
 
     def __init__(
@@ -554,8 +742,15 @@ class DepthStream:
         tolerance_ns: int,
         window: int,
         extra_topics: dict[str, str] | None = None,
+        max_frame: tuple[int, int] = DEFAULT_MAX_FRAME,
+        depth_scale: float = 1.0,
+        on_warning: Callable[[str], None] | None = None,
     ) -> None:
         self.path = path
+        self.max_frame = max_frame
+        self.depth_scale = depth_scale
+        self.on_warning = on_warning
+        self._warned: set[str] = set()
         self.extra_topics = dict(extra_topics or {})  # "clean"/"scene" -> topic (simulated data)
         self.size = size
         self.topics = topics
@@ -575,10 +770,32 @@ class DepthStream:
         self._summary_records: tuple[dict[int, Schema], dict[int, Channel]] = ({}, {})
         # ROS bags (`edge.io.bags.BagSource`): the same records, from rosbags instead of the MCAP walk
         self._source = None
+        self._chunk_limit = MAX_CHUNK_BYTES
 
     @property
     def depth_encoding(self) -> str | None:
         return self.topics[self.depth_topic].first_encoding
+
+    def _warn(self, key: str, message: str) -> None:
+        """One line per kind of warning and stream (the CLIs print it; else the `logging` warning)."""
+        if key in self._warned:
+            return
+        self._warned.add(key)
+        if self.on_warning is not None:
+            self.on_warning(message)
+        else:
+            _log.warning("warning: %s", message)
+
+    def _check_units(self, depth: np.ndarray, encoding: str, what: str) -> None:
+        if "mm" in self._warned or encoding not in ("32FC1", "64FC1"):
+            return
+        med = _valid_median(depth)
+        if med > MM_MEDIAN_M:
+            self._warn(
+                "mm", f"{what}: {encoding} depth has a median of {med:g} m over its valid pixels, beyond any "
+                f"time-of-flight range: it looks like millimetres; scale it to metres with a depth scale of "
+                f"{0.001 * self.depth_scale:g} (`depth_scale`)"
+            )
 
     def __repr__(self) -> str:
         return f"DepthStream({str(self.path)!r}, depth_topic={self.depth_topic!r}, labels_topic={self.labels_topic!r})"
@@ -599,7 +816,7 @@ class DepthStream:
                 schemas, channels = (dict(d) for d in self._summary_records)
                 records = (
                     self._source.messages() if self._source is not None
-                    else _walk(self.path, self.size, schemas, channels)
+                    else _walk(self.path, self.size, schemas, channels, chunk_limit=self._chunk_limit)
                 )
                 for schema, channel, msg in records:
                     if hook is not None:
@@ -612,11 +829,12 @@ class DepthStream:
                         continue
                     dec = decoders.get(channel.id)
                     if dec is None:
-                        dec = decoders[channel.id] = _ChannelDecoder(schema, channel)
+                        dec = decoders[channel.id] = _ChannelDecoder(schema, channel, self.max_frame)
                     if topic == self.depth_topic:
                         what = f"{name} {topic} message {n_depth} (log time {msg.log_time} ns)"
                         img = dec.image(msg.data, what)
-                        depth = _depth_metres(img, what)
+                        depth = _depth_metres(img, what, self.depth_scale)
+                        self._check_units(depth, img.encoding, f"{name} {topic}")
                         pairer.add_depth(
                             Frame(
                                 depth=depth, stamp_ns=msg.log_time, info=self.camera_info, topic=topic,
@@ -635,9 +853,12 @@ class DepthStream:
                     elif topic in extra_kind:
                         what = f"{name} {topic} message at log time {msg.log_time} ns"
                         img = dec.image(msg.data, what)
-                        pairer.add("clean", img.stamp_ns, msg.log_time, _depth_metres(img, what))
+                        pairer.add("clean", img.stamp_ns, msg.log_time, _depth_metres(img, what, self.depth_scale))
                     else:
-                        self.camera_info = dec.info(msg.data, f"{name} {topic}")
+                        try:
+                            self.camera_info = dec.info(msg.data, f"{name} {topic}")
+                        except McapDataError as exc:  # optional data: keep the last good calibration
+                            self._warn("info", f"{exc}; camera info messages like it are ignored")
                     for fr in pairer.ready():
                         self.frames_read += 1
                         yield fr
@@ -702,9 +923,11 @@ def _read_summary(path: Path):
     return summary.channels, summary.schemas, counts
 
 
-def _peek_image(schema: Schema | None, channel: Channel, msg: Message, info: _TopicInfo) -> None:
+def _peek_image(
+    schema: Schema | None, channel: Channel, msg: Message, info: _TopicInfo, max_frame: tuple[int, int]
+) -> None:
     try:
-        img = _ChannelDecoder(schema, channel).image(msg.data, channel.topic)
+        img = _ChannelDecoder(schema, channel, max_frame).image(msg.data, channel.topic)
         info.first_encoding = img.encoding
         info.first_size = (img.height, img.width)
     except (McapDataError, struct.error) as exc:
@@ -720,15 +943,40 @@ def open_depth_stream(
     window: int = DEFAULT_WINDOW,
     peek_bytes: int = PEEK_BYTES,
     extras: tuple[str, ...] = (),
+    max_frame: tuple[int, int] = DEFAULT_MAX_FRAME,
+    depth_scale: float = 1.0,
+    on_warning: Callable[[str], None] | None = None,
 ) -> DepthStream:
     """Open ``path`` and decide which topics hold depth, labels and camera info.
 
     ``topic`` / ``labels_topic`` override the automatic choice (``labels_topic=""`` disables
     labels). ``extras`` (``"clean"``, ``"scene"``) also pairs the simulator's noise-free depth
-    and scene JSON (`edge.io.frames` layout) with each frame when the file has them. Raises `McapDataError` (one line) when the file is not a readable recording or holds
+    and scene JSON (`edge.io.frames` layout) with each frame when the file has them.
+
+    Hostile input is bounded: ``max_frame`` (width, height) refuses larger frames from their
+    header, before pixels are allocated or handed to a model, and chunks decompress only up to
+    their declared size (at most `MAX_CHUNK_BYTES`, or twice the largest 64FC1 frame allowed).
+    FIFOs, devices and sockets are refused (`edge.io.paths.check_input_file`): the reader opens
+    a recording several times, and a pipe with no writer would block forever.
+
+    ``depth_scale`` multiplies the decoded metres (after 16UC1's millimetre conversion): 0.001
+    reads millimetres stored as 32FC1. A 32FC1/64FC1 frame whose valid median is beyond
+    `MM_MEDIAN_M` (10 m, no ToF camera reaches it) gets one warning per stream saying so,
+    through ``on_warning`` (default: a `logging` warning, which Python prints on stderr).
+
+    Raises `McapDataError` (one line) when the file is not a readable recording or holds
     no usable depth topic; damage *after* the first depth frame is reported during iteration.
+    `ConfigError` for a bad ``max_frame`` or ``depth_scale``; `DataError` for a special file.
     """
     p = Path(path)
+    if p.exists():  # (a missing file is _check_file's one line)
+        check_input_file(p, "recording", allow_dir=True)
+    max_frame = _check_max_frame(max_frame)
+    if isinstance(depth_scale, bool) or not isinstance(depth_scale, (int, float)) or not (
+        math.isfinite(depth_scale) and depth_scale > 0
+    ):
+        raise ConfigError(f"`depth_scale` must be a positive finite number (0.001 reads millimetres), got {depth_scale}")
+    chunk_limit = max(MAX_CHUNK_BYTES, 2 * 8 * max_frame[0] * max_frame[1])
     bag = open_bag(p)
     if bag is None:
         size = _check_file(p)
@@ -766,14 +1014,14 @@ def open_depth_stream(
     infos: dict[str, dict[str, Any]] = {}
     pos = [0]
     try:
-        records = bag.messages(pos) if bag is not None else _walk(p, size, schemas, channels, headers, pos)
+        records = bag.messages(pos) if bag is not None else _walk(p, size, schemas, channels, headers, pos, chunk_limit)
         for schema, channel, msg in records:
             t = note(channel)
             if t.kind == "image" and t.first_encoding is None and t.peek_error is None:
-                _peek_image(schema, channel, msg, t)
+                _peek_image(schema, channel, msg, t, max_frame)
             elif t.kind == "info" and channel.topic not in infos:
                 try:
-                    infos[channel.topic] = _ChannelDecoder(schema, channel).info(msg.data, channel.topic)
+                    infos[channel.topic] = _ChannelDecoder(schema, channel, max_frame).info(msg.data, channel.topic)
                 except (McapDataError, struct.error, IndexError):
                     pass
             pending = [x for x in topics.values() if x.kind == "image" and x.first_encoding is None
@@ -812,8 +1060,9 @@ def open_depth_stream(
     extra_topics = {k: EXTRA_TOPICS[k] for k in extras if EXTRA_TOPICS[k] in topics and EXTRA_TOPICS[k] != depth}
     stream = DepthStream(
         p, size, topics, depth, reason, labels, info_topic, camera_info, frame_count, profile,
-        int(tolerance_ns), int(window), extra_topics,
+        int(tolerance_ns), int(window), extra_topics, max_frame, float(depth_scale), on_warning,
     )
+    stream._chunk_limit = chunk_limit
     if summ is not None:
         stream._summary_records = (dict(summ[1]), dict(summ[0]))
     stream._source = bag
@@ -832,6 +1081,7 @@ def list_mcap_files(path: str | Path) -> list[Path]:
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: no such file or directory")
+    check_input_file(p, "data", allow_dir=True)
     if p.is_dir() and is_bag(p):
         return [p]  # a ROS 2 bag directory is one recording
     if p.is_dir():
@@ -855,6 +1105,9 @@ def open_frames(
     require_labels: bool = False,
     extras: tuple[str, ...] = (),
     tolerance_ns: int = DEFAULT_TOLERANCE_NS,
+    max_frame: tuple[int, int] = DEFAULT_MAX_FRAME,
+    depth_scale: float = 1.0,
+    on_warning: Callable[[str], None] | None = None,
 ) -> tuple[Iterator[Frame], int | None]:
     """Frames of one recording or of every recording in a directory, and their count when known.
 
@@ -869,6 +1122,8 @@ def open_frames(
         require_labels: raise when a file has no label topic or no label message.
         extras: also pair the simulator's ``"clean"`` depth and/or ``"scene"`` JSON.
         tolerance_ns: largest stamp difference of a label and its depth frame.
+        max_frame, depth_scale, on_warning: as `open_depth_stream` (a warning is given once for
+            all files, not once per file).
 
     Returns:
         (a generator of `Frame` over all files in order, the number of depth frames or None).
@@ -879,9 +1134,11 @@ def open_frames(
     """
     streams = []
     total: int | None = 0
+    warned: set[str] = set()
     for f in list_mcap_files(path):
         st = open_depth_stream(f, topic=depth_topic, labels_topic=labels_topic, tolerance_ns=tolerance_ns,
-                               extras=extras)
+                               extras=extras, max_frame=max_frame, depth_scale=depth_scale, on_warning=on_warning)
+        st._warned = warned  # one warning of each kind for the whole directory
         if require_labels:
             lt = st.topics.get(st.labels_topic) if st.labels_topic else None
             if lt is None or lt.n_messages == 0:
@@ -905,10 +1162,13 @@ def iter_frames(
     depth_topic: str | None = None,
     labels_topic: str | None = None,
     with_clean: bool = False,
+    **kw: Any,
 ) -> Iterator[Frame]:
     """Stream frames (labels where present; the simulator's scene, and its clean depth if asked).
 
-    `open_frames` without the count: the same reader, the same topic detection and pairing.
+    `open_frames` without the count: the same reader, the same topic detection and pairing;
+    ``kw``: its ``max_frame``, ``depth_scale``, ``on_warning``.
     """
-    frames, _ = open_frames(path, depth_topic, labels_topic, extras=("scene", "clean") if with_clean else ("scene",))
+    frames, _ = open_frames(path, depth_topic, labels_topic, extras=("scene", "clean") if with_clean else ("scene",),
+                            **kw)
     yield from frames

@@ -217,4 +217,4 @@ def test_foxglove_camera_calibration_json_is_used(tmp_path):
     s = open_depth_stream(p)
     assert s.info_topic == "/camera/calibration"
     assert (s.camera_info["fx"], s.camera_info["fy"], s.camera_info["cx"]) == (210.0, 212.0, 16.0)
-    assert [fr.info["d"] for fr in s] == [[0.1], [0.1]]
+    assert [fr.info["d"] for fr in s] == [[0.1, 0.0, 0.0, 0.0]] * 2  # padded to a length OpenCV takes
