@@ -32,6 +32,7 @@ __all__ = [
     "STRING_MSGDEF",
     "encode_string",
     "decode_string",
+    "stamp_fits",
 ]
 
 IMAGE_TYPE = "sensor_msgs/msg/Image"
@@ -85,6 +86,12 @@ bool do_rectify"""
 )
 
 _ENCAP_LE = b"\x00\x01\x00\x00"
+_INT32 = 1 << 31
+
+
+def stamp_fits(stamp_ns: int) -> bool:
+    """Whether ``stamp_ns`` can be a std_msgs/Header stamp (int32 seconds; after 2038 it cannot)."""
+    return -_INT32 <= int(stamp_ns) // 1_000_000_000 < _INT32
 # bytes per pixel of the encodings a depth or label reader understands
 BYTES_PER_PIXEL = {"32FC1": 4, "16UC1": 2, "mono16": 2, "mono8": 1, "8UC1": 1, "rgb8": 3, "bgr8": 3, "64FC1": 8}
 
@@ -131,8 +138,14 @@ class _W:
             self.raw(struct.pack(f"<{len(vals)}d", *vals))
 
     def header(self, stamp_ns: int, frame_id: str) -> None:
-        self.i32(int(stamp_ns // 1_000_000_000))
-        self.u32(int(stamp_ns % 1_000_000_000))
+        sec = int(stamp_ns) // 1_000_000_000
+        if not stamp_fits(stamp_ns):
+            raise McapDataError(
+                f"header stamp {stamp_ns} ns ({sec} s) does not fit a ROS 2 header (int32 seconds: "
+                "December 1901 to January 2038)"
+            )
+        self.i32(sec)
+        self.u32(int(stamp_ns) % 1_000_000_000)
         self.string(frame_id)
 
     def bytes(self) -> bytes:

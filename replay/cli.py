@@ -33,7 +33,16 @@ EPILOG = """\
 output (--out): the input's messages copied through, plus /depthseg/mask (rgb8: table dark blue,
 objects orange, unknown magenta), /depthseg/mask_raw (mono8: 0 background, 1 object, 255 unknown)
 and /depthseg/overlay (rgb8: grey depth, orange objects, magenta unknown), on the depth frames'
-timestamps; open it in Foxglove. --out-namespace changes the /depthseg prefix.
+timestamps; open it in Foxglove. --out-namespace changes the /depthseg prefix. A recording that
+already has one of these topics (e.g. a replay output replayed again) is refused before any work,
+naming a free namespace to pass to --out-namespace: one topic never gets two channels. --out
+must be a new or regular file that is not the recording (nor inside a bag directory).
+pacing (--rate): frames follow the recording's log times, but a jump of its clock longer than
+1 s (a paused recorder) is skipped, said once on stderr and counted in the summary.
+limits: frames larger than 4096x4096 (--max-frame) are refused from their header, before any
+pixel is decoded; FIFOs and devices are refused as input (copy the stream to a file first).
+A 32FC1 depth image whose median is beyond 10 m gets one warning that it looks like
+millimetres; --depth-scale 0.001 reads it as metres.
 live (--serve [HOST:]PORT, needs foxglove-sdk): a Foxglove WebSocket server; in Foxglove choose
 Open connection -> Foxglove WebSocket -> ws://HOST:PORT. It streams <ns>/depth, <ns>/mask,
 <ns>/overlay and <ns>/camera_info while the recording replays (at its own rate unless --rate);
@@ -67,8 +76,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "'' disables scoring)")
     p.add_argument("--out", type=Path, default=None, help="write an MCAP with the input plus mask and overlay topics")
     p.add_argument("--rate", type=float, default=None,
-                   help="pace playback to the recording's timestamps (1.0 = real time; default: as fast as "
-                   "possible, or 1.0 with --serve)")
+                   help="pace playback to the recording's timestamps (1.0 = real time, 0.001 to 1000; default: as "
+                   "fast as possible, or 1.0 with --serve); clock jumps over 1 s are skipped")
+    p.add_argument("--depth-scale", type=float, default=1.0, metavar="S",
+                   help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)")
+    p.add_argument("--max-frame", type=_size, default=(4096, 4096), metavar="WxH",
+                   help="refuse depth frames larger than this (default 4096x4096)")
     p.add_argument("--serve", metavar="[HOST:]PORT", default=None,
                    help="stream depth, mask, overlay and camera info live to Foxglove (WebSocket) while replaying")
     p.add_argument("--no-wait", action="store_true", help="with --serve: start replaying without waiting for a client")
@@ -84,6 +97,16 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 4096x4096, got '{text}'") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"width and height must be >= 1, got '{text}'")
+    return w, h
+
+
 def _note(msg: str) -> None:
     print(f"{PROG}: {msg}", file=sys.stderr)
 
@@ -97,23 +120,29 @@ def _report(summary, as_json: bool) -> None:
 
 
 def _body(args: argparse.Namespace) -> int:
+    from edge.cliutil import cli_message, flag_names
     from edge.infer import Segmenter
+    from edge.io.paths import check_input_file, check_outputs
     from edge.io.reader import open_depth_stream
-    from replay.replay import ReplayDataError, replay
+    from replay.replay import ReplayDataError, check_rate, replay
+    from replay.writer import check_namespace, check_output_topics
 
     if args.threads < 1:
         raise ConfigError(f"--threads must be >= 1, got {args.threads}")
+    if args.recording.exists():
+        check_input_file(args.recording, "recording", allow_dir=True)
+    if args.model is not None and args.model.exists():  # (a missing model is the Segmenter's one line)
+        check_input_file(args.model, "model")
     if args.model is not None and args.model.suffix.lower() in (".pt", ".pth"):
         raise ModelError(
             f"{args.model}: replay runs exported ONNX models; export the checkpoint with depthseg-export first"
         )
-    if args.out is not None and args.out.resolve() == args.recording.resolve():
-        raise ConfigError(f"--out {args.out} is the input recording; choose another file name")
-    from replay.writer import check_namespace
-
+    check_outputs({"out": args.out}, {"recording": args.recording, "model": args.model})
     check_namespace(args.out_namespace)
     if args.no_pace and args.rate is not None:
         raise ConfigError("--no-pace and --rate contradict each other; give one")
+    check_rate(args.rate)
+    flags = flag_names(build_parser())
     rate = args.rate
     if rate is None and args.serve is not None and not args.no_pace:
         rate = 1.0
@@ -122,7 +151,12 @@ def _body(args: argparse.Namespace) -> int:
         from replay.live import parse_address
 
         address = parse_address(args.serve)
-    stream = open_depth_stream(args.recording, args.topic, args.labels_topic)
+    stream = open_depth_stream(
+        args.recording, args.topic, args.labels_topic, max_frame=args.max_frame, depth_scale=args.depth_scale,
+        on_warning=lambda m: _note("warning: " + cli_message(m, flags)),
+    )
+    if args.out is not None:
+        check_output_topics(stream.topics, args.out_namespace)
     seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold)
     _note(f"depth topic {stream.depth_topic} ({stream.depth_reason})")
     _note(f"labels: {stream.labels_topic or 'none (no scores)'}")
@@ -158,7 +192,8 @@ def _body(args: argparse.Namespace) -> int:
         bar.update(1)
 
     try:
-        summary = replay(stream, seg, out=args.out, rate=rate, on_frame=on_frame, out_namespace=args.out_namespace)
+        summary = replay(stream, seg, out=args.out, rate=rate, on_frame=on_frame, out_namespace=args.out_namespace,
+                         on_note=lambda m: bar.write(f"{PROG}: {m}", file=sys.stderr))
     except ReplayDataError as exc:
         bar.close()
         _report(exc.summary, args.json)

@@ -39,9 +39,24 @@ from edge.metrics import (
     segmentation_mask,
 )
 
-__all__ = ["replay", "ReplaySummary", "FrameResult", "LatencyHistogram", "ReplayDataError", "UNKNOWN"]
+__all__ = ["replay", "ReplaySummary", "FrameResult", "LatencyHistogram", "ReplayDataError", "UNKNOWN", "check_rate",
+           "MAX_GAP_S"]
 
 LATE_SLACK_S = 0.005  # a paced frame starting more than this after its due time counts as late
+MAX_GAP_S = 1.0  # pacing skips a jump of the recording clock longer than this (a paused recorder, a 116-day gap)
+RATE_RANGE = (1e-3, 1e3)  # --rate: slower than 1/1000 or faster than 1000x real time is not a pace
+
+
+def check_rate(rate: float | None) -> float | None:
+    """``rate`` if it is a usable pace (a finite number in `RATE_RANGE`); else `ConfigError`, one line."""
+    if rate is None:
+        return None
+    lo, hi = RATE_RANGE
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not lo <= rate <= hi:
+        raise ConfigError(
+            f"`rate` must be a number from {lo:g} to {hi:g} (1.0 = real time, 2 = twice as fast), got {rate}"
+        )
+    return float(rate)
 
 
 class _Prediction(Protocol):
@@ -132,6 +147,7 @@ class ReplaySummary:
     metrics: MetricSummary | None = None
     late_frames: int = 0
     rate: float | None = None
+    gaps_skipped: int = 0
     unknown_fraction: float = 0.0
     object_fraction: float = 0.0
     sizes: list[tuple[int, int]] = field(default_factory=list)
@@ -169,6 +185,7 @@ class ReplaySummary:
         if self.rate is not None:
             d["rate"] = self.rate
             d["late_frames"] = self.late_frames
+            d["gaps_skipped"] = self.gaps_skipped
         if self.metrics is not None:
             m = self.metrics
             d.update(
@@ -198,7 +215,8 @@ class ReplaySummary:
             f"object share of valid pixels: {100 * self.object_fraction:.1f} %  (threshold {self.threshold:g})",
         ]
         if self.rate is not None:
-            out.append(f"paced at {self.rate:g}x recording time: {self.late_frames} frames late")
+            skipped = f"; {self.gaps_skipped} gaps over {MAX_GAP_S:g} s skipped" if self.gaps_skipped else ""
+            out.append(f"paced at {self.rate:g}x recording time: {self.late_frames} frames late{skipped}")
         if self.metrics is not None:
             m = self.metrics
             out.append(
@@ -232,6 +250,8 @@ def replay(
     on_frame: Callable[[FrameResult], None] | None = None,
     warmup: int = 1,
     out_namespace: str = "/depthseg",
+    on_note: Callable[[str], None] | None = None,
+    max_gap_s: float = MAX_GAP_S,
 ) -> ReplaySummary:
     """Segment every frame of ``stream``; optionally pace, score, and write ``out``.
 
@@ -242,10 +262,15 @@ def replay(
     ``warmup`` times untimed (onnxruntime allocates on its first run), so the latency
     percentiles describe the steady state; the wall clock for frames/s includes it.
     ``out_namespace`` prefixes the topics added to ``out`` (``<ns>/mask``, ``<ns>/mask_raw``,
-    ``<ns>/overlay``).
+    ``<ns>/overlay``); a namespace whose topics the input already has is refused
+    (`replay.writer.check_output_topics`).
+
+    Pacing (``rate``, within `RATE_RANGE`) follows the frames' log times, except across a jump of
+    the recording clock (forwards or back) longer than ``max_gap_s`` of recording time: that gap is
+    skipped (pacing restarts at the next frame), counted in ``gaps_skipped`` and, the first time,
+    told through ``on_note``, so a recorder paused for days does not make replay wait for days.
     """
-    if rate is not None and not (rate > 0 and math.isfinite(rate)):
-        raise ConfigError(f"`rate` must be a positive number (1.0 = real time), got {rate}")
+    rate = check_rate(rate)
     if threshold is not None and not 0.0 < float(threshold) < 1.0:
         raise ConfigError(f"`threshold` must lie strictly between 0 and 1, got {threshold}")
     thr = float(threshold) if threshold is not None else float(segmenter.threshold)
@@ -255,6 +280,9 @@ def replay(
     if out is not None:
         from replay.writer import ReplayWriter
 
+        from replay.writer import check_output_topics
+
+        check_output_topics(getattr(stream, "topics", None) or (), out_namespace)
         writer = ReplayWriter(out, profile=getattr(stream, "profile", ""), namespace=out_namespace)
         if hasattr(stream, "message_hook"):
             stream.message_hook = writer.copy
@@ -269,6 +297,8 @@ def replay(
     stage_sums: dict[str, float] = {}
     t_start = time.perf_counter()
     first_stamp: int | None = None
+    prev_stamp = 0
+    gaps = 0
     t_origin = t_start
     error: str | None = None
     try:
@@ -279,6 +309,15 @@ def replay(
                         segmenter.predict(fr.depth)
                 is_late = False
                 if rate is not None:
+                    if first_stamp is not None and abs(fr.stamp_ns - prev_stamp) > max_gap_s * 1e9:
+                        if gaps == 0 and on_note is not None:
+                            on_note(
+                                f"the recording clock jumps by {(fr.stamp_ns - prev_stamp) / 1e9:.6g} s before frame "
+                                f"{n}; pacing skips gaps longer than {max_gap_s:g} s (this note is given once)"
+                            )
+                        gaps += 1
+                        first_stamp = None
+                    prev_stamp = fr.stamp_ns
                     if first_stamp is None:
                         first_stamp, t_origin = fr.stamp_ns, time.perf_counter()
                     due = t_origin + (fr.stamp_ns - first_stamp) / 1e9 / rate
@@ -349,6 +388,7 @@ def replay(
         metrics=metrics,
         late_frames=late,
         rate=rate,
+        gaps_skipped=gaps,
         unknown_fraction=n_unknown / n_pix if n_pix else 0.0,
         object_fraction=n_obj / n_valid if n_valid else 0.0,
         sizes=sizes,

@@ -37,7 +37,8 @@ from edge.io.frames import Frame
 from edge.io.writer import McapWriter
 from edge.metrics import UNKNOWN
 
-__all__ = ["ReplayWriter", "overlay_rgb", "mask_rgb", "output_topics", "check_namespace", "MASK_TOPIC",
+__all__ = ["ReplayWriter", "overlay_rgb", "mask_rgb", "output_topics", "check_namespace", "check_output_topics",
+           "MASK_TOPIC",
            "MASK_RAW_TOPIC", "OVERLAY_TOPIC", "DEFAULT_NAMESPACE", "UNKNOWN", "OBJECT_RGB", "UNKNOWN_RGB",
            "MASK_COLOURS"]
 
@@ -72,6 +73,24 @@ def output_topics(namespace: str = DEFAULT_NAMESPACE) -> dict[str, str]:
     """{'mask', 'mask_raw', 'overlay'} -> topic under ``namespace``."""
     ns = check_namespace(namespace)
     return {k: f"{ns}/{k}" for k in ("mask", "mask_raw", "overlay")}
+
+
+def check_output_topics(input_topics, namespace: str = DEFAULT_NAMESPACE) -> None:
+    """Refuse a namespace whose output topics the input already has (`ConfigError`, one line).
+
+    Why refuse rather than rename: replaying a replay's output into the same namespace would put
+    two channels on ``/depthseg/mask`` (the old mask and the new one) and a viewer would show
+    either. The user picks the namespace (`namespace`), so the output never surprises.
+    """
+    ns = check_namespace(namespace)
+    clash = sorted(set(output_topics(ns).values()) & set(input_topics))
+    if clash:
+        free = next(f"{ns}{i}" for i in range(2, 1000)
+                    if not set(output_topics(f"{ns}{i}").values()) & set(input_topics))
+        raise ConfigError(
+            f"the recording already has {', '.join(clash)} (is it a replay output?); the output would hold "
+            f"two channels on one topic: choose another `namespace`, e.g. {free}"
+        )
 
 
 def mask_rgb(mask: np.ndarray) -> np.ndarray:
@@ -124,6 +143,8 @@ class ReplayWriter(McapWriter):
         namespace: str = DEFAULT_NAMESPACE,
     ) -> None:
         self.topics = output_topics(namespace)  # before the file exists: a bad namespace leaves nothing behind
+        self.namespace = check_namespace(namespace)
+        self._own = frozenset(self.topics.values())
         self.profile = profile if profile in ("ros2", "") else ""
         super().__init__(path, profile=self.profile, library="depthseg-replay",
                          compression=compression, chunk_size=chunk_size)
@@ -138,8 +159,13 @@ class ReplayWriter(McapWriter):
         self.written = 0
 
     def copy(self, schema: Schema | None, channel: Channel, message: Message) -> None:
-        """Pass one input message through unchanged (a `DepthStream.message_hook`)."""
+        """Pass one input message through unchanged (a `DepthStream.message_hook`).
+
+        Raises `ConfigError` when the input has a topic this writer adds (`check_output_topics`).
+        """
         cid = self._channels.get(channel.id)
+        if cid is None and channel.topic in self._own:
+            check_output_topics([channel.topic], self.namespace)
         data = message.data
         if self.profile == "ros2" and channel.message_encoding != "cdr":
             if channel.message_encoding != "json":
@@ -170,8 +196,14 @@ class ReplayWriter(McapWriter):
         self.copied += 1
 
     def write(self, frame: Frame, mask: np.ndarray) -> None:
-        """Mask (and overlay) of one frame, on the frame's timestamps."""
+        """Mask (and overlay) of one frame, on the frame's timestamps.
+
+        The header stamp is the depth frame's; when that is 0 (no stamp) its log time, if a ROS 2
+        header can hold it (int32 seconds end in 2038), else 0 like the input's.
+        """
         stamp = int(frame.extra.get("header_stamp_ns") or frame.stamp_ns)
+        if not rosmsg.stamp_fits(stamp):
+            stamp = 0
         frame_id = str(frame.extra.get("frame_id", ""))
         t = int(frame.stamp_ns)
         m = np.ascontiguousarray(mask, dtype=np.uint8)

@@ -95,7 +95,7 @@ def test_damaged_input_output_written_error_and_exit_2(linear_onnx, tmp_path, ca
         (lambda p: p.mkdir(), [], ["is a directory"]),
         (lambda p: None, [], ["no such file"]),
         (lambda p: p.write_text("x" * 100), [], ["not an MCAP file"]),
-        (lambda p: write_ros2(p, n=2), ["--rate", "0"], ["--rate must be a positive number"]),
+        (lambda p: write_ros2(p, n=2), ["--rate", "0"], ["--rate must be a number from 0.001 to 1000"]),
         (lambda p: write_ros2(p, n=2), ["--threshold", "1.5"], ["threshold must lie in (0, 1)"]),
         (lambda p: write_ros2(p, n=2), ["--threads", "0"], ["--threads must be >= 1"]),
         (lambda p: write_ros2(p, n=2), ["--topic", "/nope"], ["no depth topic '/nope'", "/pico_flexx/image_depth"]),
@@ -121,7 +121,7 @@ def test_bad_models_are_one_line_errors(tmp_path, capsys):
     rc, _, err = run_cli(capsys, rec.path, "--model", tmp_path / "junk.onnx")
     assert_one_line_error(rc, err, "not a readable ONNX model")
     rc, _, err = run_cli(capsys, rec.path, "--model", tmp_path / "junk.onnx", "--out", rec.path)
-    assert_one_line_error(rc, err, "is the input recording")
+    assert_one_line_error(rc, err, "would overwrite the input")
 
 
 MCAP_DIR = SHARED / "data" / "mcap"
