@@ -50,6 +50,7 @@ parser.add_argument("--baseline-median", type=int, choices=(0, 3, 5), default=3,
                     help="baseline: median filter on the height map, 0 (off), 3 or 5 pixels (default 3)")
 parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: auto-detected, e.g. {TOPIC_DEPTH})")
 parser.add_argument("--labels-topic", default=None, help=f"label Image topic, mono8 nonzero = object (default: auto-detected, e.g. {TOPIC_LABELS})")
+parser.add_argument("--depth-scale", type=float, default=1.0, metavar="S", help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)")
 parser.add_argument("--limit", type=int, default=None, metavar="N", help="stop after N labelled frames")
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
@@ -171,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.threads < 1:
             raise ConfigError(f"--threads must be >= 1, got {args.threads}")
         base = PlaneBaseline(height_threshold_m=args.baseline_height, median_px=args.baseline_median) if args.baseline else False
-        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, require_labels=True)
+        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, require_labels=True, depth_scale=args.depth_scale)
         predictor = load_predictor(args.model, threads=args.threads)
         if args.limit is not None and total is not None:
             total = min(total, args.limit)

@@ -53,19 +53,20 @@ parser.add_argument("--pseudo-height", type=float, default=0.008, metavar="M",
                     help="pseudo-labels: height above the plane that counts as object, metres (default 0.008)")
 parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: {TOPIC_DEPTH}, else auto-detected)")
 parser.add_argument("--labels-topic", default=None, help=f"label Image topic (default: {TOPIC_LABELS}, else auto-detected)")
+parser.add_argument("--depth-scale", type=float, default=1.0, metavar="S", help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)")
 parser.add_argument("--limit", type=int, default=None, metavar="N", help="use at most N frames")
 parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
 
-def open_frames(path: str, depth_topic: str | None, labels_topic: str | None, pseudo: bool) -> tuple[Iterator[Frame], int | None]:
+def open_frames(path: str, depth_topic: str | None, labels_topic: str | None, pseudo: bool, depth_scale: float = 1.0) -> tuple[Iterator[Frame], int | None]:
     """Frames of every recording in PATH through `edge.io.open_frames` (labelled, or depth only for pseudo-labels)."""
     from edge.errors import DataError
     from edge.io import open_frames as open_recordings
 
     if pseudo:
-        return open_recordings(path, depth_topic, labels_topic="")
+        return open_recordings(path, depth_topic, labels_topic="", depth_scale=depth_scale)
     try:
-        return open_recordings(path, depth_topic, labels_topic, require_labels=True)
+        return open_recordings(path, depth_topic, labels_topic, require_labels=True, depth_scale=depth_scale)
     except DataError as exc:
         if "no labels found" not in str(exc):
             raise
@@ -172,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--plot {args.plot}: directory {Path(args.plot).parent} does not exist")
 
         pseudo = None
-        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, args.pseudo_labels)
+        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, args.pseudo_labels, args.depth_scale)
         predictor = load_predictor(model_path, threads=args.threads)
         if args.pseudo_labels:
             pseudo = pseudo_labeller(args.pseudo_height, seed=args.seed, sensor=predictor.meta.sensor)

@@ -278,9 +278,7 @@ def replay(
 
     writer = None
     if out is not None:
-        from replay.writer import ReplayWriter
-
-        from replay.writer import check_output_topics
+        from replay.writer import ReplayWriter, check_output_topics
 
         check_output_topics(getattr(stream, "topics", None) or (), out_namespace)
         writer = ReplayWriter(out, profile=getattr(stream, "profile", ""), namespace=out_namespace)

@@ -26,6 +26,7 @@ from typing import Any
 from mcap.records import Channel, Message, Schema
 
 from edge.errors import McapDataError
+from edge.io.paths import special_kind
 
 __all__ = ["is_bag", "BagSource", "open_bag", "bag_kind"]
 
@@ -72,6 +73,10 @@ class BagSource:
             raise McapDataError(f"{path}: not a ROS bag (.bag, .db3 or a directory with metadata.yaml)")
         if self.kind == "ros1" and path.is_file() and path.stat().st_size == 0:
             raise McapDataError(f"{path}: empty file (0 bytes), not a ROS 1 bag")
+        for f in path.rglob("*") if path.is_dir() else ():
+            kind = special_kind(f)
+            if kind is not None:  # rosbags would open it and block on a FIFO with no writer
+                raise McapDataError(f"{path}: {f.name} in the bag directory is a {kind}, not a file; copy the data first")
         self.size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if path.is_dir() else path.stat().st_size
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
