@@ -141,7 +141,7 @@ class _TopicInfo:
         if self.message_encoding not in _DECODABLE:
             bits.append(f"message encoding '{self.message_encoding}'")
         if self.peek_error:
-            bits.append("unreadable")
+            bits.append(f"unreadable: {self.peek_error.split(': ', 1)[-1][:100]}")
         elif self.kind == "image" and self.first_encoding is None:
             bits.append("no messages" if self.n_messages == 0 else "no messages seen")
         return f"{self.topic} ({', '.join(bits)})"
@@ -491,8 +491,12 @@ class _ChannelDecoder:
             )
         self.compressed = name in COMPRESSED_IMAGE_TYPES
 
-    def image(self, data: bytes, what: str) -> rosmsg.RosImage:
-        """The image header and pixel bytes; its size is checked against ``max_frame`` first."""
+    def image(self, data: bytes, what: str, check_size: bool = True) -> rosmsg.RosImage:
+        """The image header and pixel bytes; its size is checked against ``max_frame`` first.
+
+        ``check_size=False`` (topic detection: only the header is looked at) skips the check for
+        raw images; a compressed image is always checked, since it is decoded here.
+        """
         if self.enc == "cdr" and self.compressed:
             c = decode_compressed_image(data, what)
             arr, pix = decompress_depth(c, what, max_frame=self.max_frame)
@@ -504,7 +508,8 @@ class _ChannelDecoder:
             img = _json_image(data, what)
         else:
             img = _protobuf_image(self._proto, data, what)
-        check_frame_size(img.width, img.height, self.max_frame, what)
+        if check_size:
+            check_frame_size(img.width, img.height, self.max_frame, what)
         return img
 
     def info(self, data: bytes, what: str) -> dict[str, Any]:
@@ -620,12 +625,15 @@ def _pick_info(topics: dict[str, _TopicInfo], depth: str) -> str | None:
     return cands[0].topic if len(cands) == 1 else None
 
 
-def _check_topic(topics: dict[str, _TopicInfo], topic: str, role: str, path: Path, flag: str) -> None:
+def _check_topic(
+    topics: dict[str, _TopicInfo], topic: str, role: str, path: Path, flag: str, damage: str | None = None
+) -> None:
     info = topics.get(topic)
     if info is None:
         images = [t.describe() for t in topics.values() if t.kind == "image"]
+        where = f" before the damage ({damage})" if damage else ""
         raise McapDataError(
-            f"{path}: no {role} topic '{topic}'; image topics: {_list(images) if images else 'none'}; "
+            f"{path}: no {role} topic '{topic}'{where}; image topics: {_list(images) if images else 'none'}; "
             f"check {flag}"
         )
     if info.kind != "image":
@@ -927,7 +935,7 @@ def _peek_image(
     schema: Schema | None, channel: Channel, msg: Message, info: _TopicInfo, max_frame: tuple[int, int]
 ) -> None:
     try:
-        img = _ChannelDecoder(schema, channel, max_frame).image(msg.data, channel.topic)
+        img = _ChannelDecoder(schema, channel, max_frame).image(msg.data, channel.topic, check_size=False)
         info.first_encoding = img.encoding
         info.first_size = (img.height, img.width)
     except (McapDataError, struct.error) as exc:
@@ -1033,12 +1041,12 @@ def open_depth_stream(
     except _Damage as d:
         damage = f"byte {d.offset}: {d.what}"
     if topic:
-        _check_topic(topics, topic, "depth", p, "`depth_topic`")
+        _check_topic(topics, topic, "depth", p, "`depth_topic`", damage)
         depth, reason = topic, "chosen explicitly"
     else:
         depth, reason = _pick_depth(topics, p, damage)
     if labels_topic:
-        _check_topic(topics, labels_topic, "labels", p, "`labels_topic`")
+        _check_topic(topics, labels_topic, "labels", p, "`labels_topic`", damage)
         if labels_topic == depth:
             raise McapDataError(f"{p}: `labels_topic` {labels_topic} is the depth topic; choose the label topic")
         labels: str | None = labels_topic
