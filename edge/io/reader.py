@@ -293,6 +293,9 @@ def _decompress_chunk(chunk: Chunk, offset: int, limit: int) -> bytes:
         if comp == "zstd":
             import zstandard
 
+            claimed = zstandard.frame_content_size(chunk.data)  # -1: not in the frame header
+            if claimed > declared:  # rosbags' reader would allocate this much
+                raise _Damage(offset, f"zstd frame claims {claimed} bytes, its chunk header {declared}: corrupt")
             parts: list[bytes] = []
             got = 0
             with zstandard.ZstdDecompressor().stream_reader(chunk.data, read_across_frames=True) as r:
@@ -307,6 +310,9 @@ def _decompress_chunk(chunk: Chunk, offset: int, limit: int) -> bytes:
         elif comp == "lz4":
             import lz4.frame
 
+            claimed = lz4.frame.get_frame_info(chunk.data).get("content_size", 0)  # 0: not in the header
+            if claimed > declared:
+                raise _Damage(offset, f"lz4 frame claims {claimed} bytes, its chunk header {declared}: corrupt")
             d = lz4.frame.LZ4FrameDecompressor()
             data = d.decompress(chunk.data, max_length=declared + 1)
             if len(data) <= declared and not d.eof:
@@ -916,6 +922,35 @@ def _check_file(path: Path) -> int:
     return size
 
 
+def _check_bag_chunks(bag_dir: Path, limit: int) -> None:
+    """Decompress every chunk of a ROS 2 bag's MCAP files within our bounds before ``rosbags`` does.
+
+    ``rosbags`` decompresses a chunk in one call, trusting its headers; a few kB can claim
+    gigabytes. This pass (`_decompress_chunk`: streamed, stops past the declared size) finds
+    such a chunk first, at the cost of decompressing each chunk twice.
+    """
+    for f in sorted(bag_dir.rglob("*.mcap")):
+        if not f.is_file():
+            continue  # (a FIFO is refused by `edge.io.bags` with its name; opening it here would block)
+        size = f.stat().st_size
+        with open(f, "rb") as raw:
+            fh = _ClampedFile(raw, size)
+            records = StreamReader(fh, emit_chunks=True, validate_crcs=False, record_size_limit=size).records
+            while True:
+                start = fh.pos
+                try:
+                    rec = next(records)
+                except StopIteration:
+                    break
+                except Exception:  # damage that is not a bomb: rosbags reports it in its own words
+                    break
+                if isinstance(rec, Chunk):
+                    try:
+                        _decompress_chunk(rec, start, limit)
+                    except _Damage as d:
+                        raise McapDataError(f"{f}: damaged at byte {d.offset} of {size}: {d.what}") from None
+
+
 def _read_summary(path: Path):
     """(channels, schemas, message counts per channel or None); None when the summary is unusable."""
     from mcap.reader import SeekingReader
@@ -985,6 +1020,8 @@ def open_depth_stream(
     ):
         raise ConfigError(f"`depth_scale` must be a positive finite number (0.001 reads millimetres), got {depth_scale}")
     chunk_limit = max(MAX_CHUNK_BYTES, 2 * 8 * max_frame[0] * max_frame[1])
+    if p.is_dir() and is_bag(p):
+        _check_bag_chunks(p, chunk_limit)
     bag = open_bag(p)
     if bag is None:
         size = _check_file(p)

@@ -120,7 +120,9 @@ def test_a_chunk_lying_about_its_size_is_not_inflated(tmp_path, compression, ple
     grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0) / 1024
     assert peak < 8 << 20 and grown_mb < 32, (peak, grown_mb)
     msg = one_line(e.value)
-    assert "before the damage (byte " in msg and "more than the 64 bytes its header declares" in msg, msg
+    assert "before the damage (byte " in msg, msg
+    # a size in the compressed frame's own header is compared first; without one, streaming stops at 65 bytes
+    assert ("its chunk header 64: corrupt" if pledge else "more than the 64 bytes its header declares") in msg, msg
 
 
 def test_a_chunk_claiming_more_than_the_limit_is_refused_unread(tmp_path):
@@ -430,3 +432,20 @@ def test_millimetres_in_32fc1_warn_once_and_depth_scale_fixes_them(tmp_path, cap
 def test_every_error_here_is_a_depthseg_error():
     """The CLIs turn exactly these into one line; anything else would be a traceback."""
     assert issubclass(McapDataError, DepthsegError) and issubclass(ConfigError, DepthsegError)
+
+
+def test_a_bomb_inside_a_ros2_bag_directory_is_found_before_rosbags_reads_it(tmp_path):
+    """rosbags decompresses a chunk in one call; our bounded pass over the bag's MCAP files runs first."""
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    mcap_file(bag / "bag_0.mcap", _bomb_chunk("zstd", 16 << 20, True))
+    tracemalloc.start()
+    try:
+        with pytest.raises(McapDataError) as e:
+            open_depth_stream(bag)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 << 20
+    assert "bag_0.mcap: damaged at byte" in one_line(e.value) and "zstd frame claims" in str(e.value)
