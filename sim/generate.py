@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field, replace
+import typing
+from dataclasses import dataclass, field, fields, replace
 from functools import lru_cache
 from typing import Any
 
@@ -24,7 +25,16 @@ from edge.io import SIM_EPOCH_NS
 from edge.meta import SensorSpec
 from sim.physics import PhysicsConfig, PhysicsUnstable, drop
 from sim.render import Camera, ray_grid, render
-from sim.scene import SceneConfig, SceneSpec, quat_to_matrix, sample_scene
+from sim.scene import (
+    SceneConfig,
+    SceneSpec,
+    _short_keys,
+    check_fields,
+    check_number,
+    check_value,
+    quat_to_matrix,
+    sample_scene,
+)
 from sim.sensor import SensorConfig, apply_sensor, draw_frame_params
 from sim.shapes import MeshLibrary
 
@@ -33,6 +43,7 @@ __all__ = ["SimConfig", "SimFrame", "generate_frame", "FRAME_PERIOD_NS"]
 FRAME_PERIOD_NS = 22_222_222  # 45 fps: Royale MODE_5_45FPS_500, the wrist-camera use case
 # fx, fy, cx, cy fitted to the points of the shared real capture (depthseg-sim import ply)
 REAL_PICO_FLEXX_K = (202.0, 204.8, 115.8, 88.0)
+MAX_RENDER_THREADS = 256
 
 
 @dataclass(frozen=True)
@@ -84,54 +95,66 @@ class SimConfig:
             ),
         }
 
+    def __post_init__(self) -> None:
+        check_fields(self, "config")
+        check_number("config.render_threads", self.render_threads, 1, MAX_RENDER_THREADS)
+        check_number("config.intrinsics_steps", self.intrinsics_steps, 0, 64)
+        if min(self.intrinsics_to) <= 0:
+            raise ConfigError(
+                f"config.intrinsics_to must be four positive numbers fx, fy, cx, cy; got {list(self.intrinsics_to)}"
+            )
+
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> SimConfig:
-        """Build from JSON (e.g. ``--config``); missing sections keep their defaults."""
-        d = dict(d or {})
+        """Build from JSON (e.g. ``--config``); missing sections keep their defaults.
+
+        Every value is checked by type and range (`sim.scene.check_value`): one `ConfigError`
+        naming the key, never a silent conversion (``"no"`` is not false, ``"05"`` not [0, 5]).
+        """
+        if d is None:
+            d = {}
+        if not isinstance(d, dict):
+            raise ConfigError(f"a simulator config must be a JSON object {{\"scene\": ...}}, got {type(d).__name__}")
+        d = dict(d)
         known = {"scene", "physics", "sensor", "camera", "supersample_edges", "render_threads", "intrinsics_steps",
                  "intrinsics_to"}
         unknown = sorted(set(d) - known)
         if unknown:
-            raise ConfigError(f"unknown config sections {unknown}; valid: {sorted(known)}")
-        cam = d.get("camera") or {}
+            raise ConfigError(f"unknown config sections {_short_keys(unknown)}; valid: {sorted(known)}")
+        cam = d.get("camera")
+        cam = {} if cam is None else cam
         if not isinstance(cam, dict):
-            raise ConfigError("config section 'camera' must be an object")
-        ckeys = {"width", "height", "fx", "fy", "cx", "cy", "distortion"}
+            raise ConfigError(f"config section 'camera' must be an object, got {type(cam).__name__}")
+        base = Camera.from_spec(SensorSpec())
+        ckeys = {f.name for f in fields(Camera)}
         bad = sorted(set(cam) - ckeys)
         if bad:
-            raise ConfigError(f"unknown camera keys {bad}; valid keys: {sorted(ckeys)}")
-        base = Camera.from_spec(SensorSpec())
-        try:
-            camera = Camera(
-                width=int(cam.get("width", base.width)),
-                height=int(cam.get("height", base.height)),
-                fx=float(cam.get("fx", base.fx)),
-                fy=float(cam.get("fy", base.fy)),
-                cx=float(cam.get("cx", base.cx)),
-                cy=float(cam.get("cy", base.cy)),
-                distortion=tuple(float(v) for v in cam.get("distortion", ())),
-            )
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"bad camera config: {exc}") from None
+            raise ConfigError(f"unknown camera keys {_short_keys(bad)}; valid keys: {sorted(ckeys)}")
+        hints = typing.get_type_hints(Camera)
+        for k, v in cam.items():
+            check_value(f"camera.{k}", v, hints[k])
+        camera = Camera(
+            width=int(cam.get("width", base.width)),
+            height=int(cam.get("height", base.height)),
+            fx=float(cam.get("fx", base.fx)),
+            fy=float(cam.get("fy", base.fy)),
+            cx=float(cam.get("cx", base.cx)),
+            cy=float(cam.get("cy", base.cy)),
+            distortion=tuple(float(v) for v in cam.get("distortion", ())),
+        )
         steps = d.get("intrinsics_steps", 0)
-        if isinstance(steps, bool) or not isinstance(steps, int) or not 0 <= steps <= 64:
-            raise ConfigError(f"intrinsics_steps must be a whole number in [0, 64], got {steps!r}")
+        check_value("config.intrinsics_steps", steps, int)
         k_to = d.get("intrinsics_to", REAL_PICO_FLEXX_K)
-        try:
-            k_to = tuple(float(v) for v in k_to)
-        except (TypeError, ValueError):
-            k_to = ()
-        if len(k_to) != 4 or not all(np.isfinite(k_to)) or min(k_to) <= 0:
-            raise ConfigError(f"intrinsics_to must be four positive numbers fx, fy, cx, cy; got {d.get('intrinsics_to')!r}")
+        check_value("config.intrinsics_to", k_to, tuple[float, float, float, float])
         return cls(
-            intrinsics_steps=steps,
-            intrinsics_to=k_to,
+            intrinsics_steps=int(steps),
+            intrinsics_to=tuple(float(v) for v in k_to),
             scene=SceneConfig.from_dict(d.get("scene")),
             physics=PhysicsConfig.from_dict(d.get("physics")),
             sensor=SensorConfig.from_dict(d.get("sensor")),
             camera=camera,
-            supersample_edges=bool(d.get("supersample_edges", True)),
-            render_threads=int(d.get("render_threads", 1)),
+            supersample_edges=d.get("supersample_edges", True),
+            render_threads=d.get("render_threads", 1),
         )
 
     def digest(self) -> str:

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from edge.errors import ConfigError
-from sim.scene import SceneSpec, _to_dict, check_number, config_from_dict
+from sim.scene import SceneSpec, _to_dict, check_fields, check_number, config_from_dict
 
 __all__ = ["PhysicsConfig", "DropResult", "PhysicsUnstable", "drop"]
 
@@ -63,6 +63,7 @@ class PhysicsConfig:
     max_attempts: int = 5  # redraws after an unstable drop before giving up on the frame
 
     def __post_init__(self) -> None:
+        check_fields(self, "physics")
         check_number("physics.timestep_s", self.timestep_s, 1e-4, 0.02)
         check_number("physics.max_time_s", self.max_time_s, 0.0, 60.0)
         check_number("physics.rest_linear_m_s", self.rest_linear_m_s, 0.0)

@@ -41,6 +41,9 @@ __all__ = ["Camera", "RayGrid", "RenderResult", "Support", "ray_grid", "render",
 
 FLOOR_ID = 0  # ids: 0 floor, k + 1 object k, NO_HIT nothing
 NO_HIT = -1
+# Largest frame the simulator renders: a few float64 arrays of (H, W, 3) per frame and worker must
+# stay far below 1 GB (a pico flexx frame has 38,304 pixels; 1024 x 1024 is ~27x that).
+MAX_CAMERA_PIXELS = 1024 * 1024
 
 # Rotated-grid supersampling offsets (pixels), 4 samples: each row and column sampled once.
 _RGSS = np.array([[-0.375, -0.125], [0.125, -0.375], [0.375, 0.125], [-0.125, 0.375]])
@@ -59,8 +62,16 @@ class Camera:
     distortion: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
+        from sim.scene import check_fields
+
+        check_fields(self, "camera")  # whole sizes, finite intrinsics (no NaN, no Infinity)
         if self.width < 2 or self.height < 2:
             raise ConfigError(f"camera size {self.width}x{self.height} is too small")
+        if self.width * self.height > MAX_CAMERA_PIXELS:
+            raise ConfigError(
+                f"camera size {self.width}x{self.height} is above the simulator's limit of {MAX_CAMERA_PIXELS} pixels "
+                "(a pico flexx frame is 224x171)"
+            )
         for name in ("fx", "fy"):
             if not float(getattr(self, name)) > 0:
                 raise ConfigError(f"camera.{name} must be positive, got {getattr(self, name)}")

@@ -26,7 +26,9 @@ The small rotation helpers live here because scene sampling, physics and renderi
 from __future__ import annotations
 
 import math
+import typing
 from dataclasses import asdict, dataclass, field, fields
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -41,6 +43,9 @@ __all__ = [
     "sample_scene",
     "config_from_dict",
     "check_range",
+    "check_number",
+    "check_value",
+    "check_fields",
     "euler_to_quat",
     "quat_to_matrix",
     "camera_rotation",
@@ -125,14 +130,82 @@ def camera_rotation(yaw: float, tilt_x: float, tilt_y: float) -> np.ndarray:
 # --------------------------------------------------------------------------- configuration helpers
 
 
+def _show(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to one short line (a hostile config may hold a megabyte string)."""
+    r = repr(value)
+    return r if len(r) <= limit else r[: limit - 3] + "..."
+
+
+def _is_number(value: Any) -> bool:
+    """A JSON number (int or float, numpy scalars too); never a bool or a string."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _finite(value: Any) -> bool:
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:  # an int too large for a float
+        return False
+
+
+def check_value(name: str, value: Any, kind: Any) -> None:
+    """Refuse ``value`` unless it is what the type hint ``kind`` says, as JSON spells it.
+
+    The one type rule for every simulator setting: a ``bool`` is a JSON boolean (``"no"`` is not
+    false), an ``int`` a whole number, a ``float`` a finite number (NaN and Infinity, which
+    Python's json accepts, are refused), a ``str`` a string, ``tuple[X, Y]`` a list of exactly
+    those, ``tuple[X, ...]`` a list of X. A string is never a list (``"05"`` is not ``[0, 5]``).
+    Other kinds (nested configs) must be instances of the class.
+
+    Raises:
+        ConfigError: naming the setting and the value.
+    """
+    origin = typing.get_origin(kind)
+    if kind is bool:
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(f"{name} must be true or false (a JSON boolean), got {_show(value)}")
+    elif kind is int:
+        if not (_is_number(value) and _finite(value) and float(value) == int(value)):
+            raise ConfigError(f"{name} must be a whole number, got {_show(value)}")
+    elif kind is float:
+        if not (_is_number(value) and _finite(value)):
+            raise ConfigError(f"{name} must be a finite number, got {_show(value)}")
+    elif kind is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{name} must be a string, got {_show(value)}")
+    elif origin is tuple:
+        args = typing.get_args(kind)
+        many = bool(args) and args[-1] is Ellipsis
+        what = "strings" if args and args[0] is str else "numbers"
+        want = f"a list of {what}" if many else f"a list of {len(args)} {what}"
+        if not isinstance(value, (list, tuple)) or (not many and len(value) != len(args)):
+            raise ConfigError(f"{name} must be {want}, got {_show(value)}")
+        kinds = [args[0]] * len(value) if many else list(args)
+        for i, (v, k) in enumerate(zip(value, kinds)):
+            check_value(f"{name}[{i}]", v, k)
+    elif isinstance(kind, type) and not isinstance(value, kind):
+        raise ConfigError(f"{name} must be a {kind.__name__}, got {_show(value)}")
+
+
+@cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def check_fields(obj: Any, section: str) -> None:
+    """`check_value` on every field of the dataclass ``obj`` (call it first in ``__post_init__``)."""
+    hints = _hints(type(obj))
+    for f in fields(obj):
+        check_value(f"{section}.{f.name}", getattr(obj, f.name), hints[f.name])
+
+
 def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: float | None = None) -> tuple:
     """A (min, max) pair of finite numbers with min <= max, inside optional bounds."""
-    try:
-        lo, hi = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a [min, max] pair of numbers, got {value!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ConfigError(f"{name} must be finite, got [{lo}, {hi}]")
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) for v in value)):
+        raise ConfigError(f"{name} must be a [min, max] pair of numbers, got {_show(value)}")
+    if not (_finite(value[0]) and _finite(value[1])):
+        raise ConfigError(f"{name} must be finite, got {_show(list(value))}")
+    lo, hi = float(value[0]), float(value[1])
     if lo > hi:
         raise ConfigError(f"{name}: min {lo} is above max {hi}; swap them")
     if lo_bound is not None and lo < lo_bound:
@@ -143,17 +216,24 @@ def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: 
 
 
 def check_number(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> None:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(x) or (lo is not None and x < lo) or (hi is not None and x > hi):
+    """A finite number (not a bool, not a string) inside optional bounds."""
+    if not _is_number(value):
+        raise ConfigError(f"{name} must be a number, got {_show(value)}")
+    if not _finite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
         lim = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-        raise ConfigError(f"{name} = {value!r} is outside {lim}")
+        raise ConfigError(f"{name} = {_show(value)} is outside {lim}")
+
+
+def _short_keys(keys: list[str]) -> list[str]:
+    """At most ten keys, each cut to 40 characters, for a one-line message."""
+    return [k if len(k) <= 40 else k[:37] + "..." for k in keys[:10]] + (["..."] if len(keys) > 10 else [])
 
 
 def config_from_dict(cls: type, d: dict[str, Any] | None, section: str) -> Any:
-    """Build a frozen config dataclass from JSON-like data; unknown keys and bad values raise."""
+    """Build a frozen config dataclass from JSON-like data; unknown keys and bad values raise.
+
+    Values are checked by type in the class's ``__post_init__`` (`check_fields`).
+    """
     if d is None:
         return cls()
     if not isinstance(d, dict):
@@ -161,7 +241,7 @@ def config_from_dict(cls: type, d: dict[str, Any] | None, section: str) -> Any:
     known = {f.name: f for f in fields(cls)}
     unknown = sorted(set(d) - set(known))
     if unknown:
-        raise ConfigError(f"unknown {section} keys {unknown}; valid keys: {sorted(known)}")
+        raise ConfigError(f"unknown {section} keys {_short_keys(unknown)}; valid keys: {sorted(known)}")
     kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()}
     try:
         return cls(**kw)
@@ -214,6 +294,7 @@ class SceneConfig:
     views_per_scene: int = 1
 
     def __post_init__(self) -> None:
+        check_fields(self, "scene")
         n = check_range("scene.n_objects", self.n_objects, 0, 200)
         if any(float(v) != int(v) for v in n):
             raise ConfigError(f"scene.n_objects must be whole numbers, got {list(self.n_objects)}")

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from sim.render import FLOOR_ID, NO_HIT, RayGrid, RenderResult
-from sim.scene import _to_dict, check_number, check_range, config_from_dict
+from sim.scene import _to_dict, check_fields, check_number, check_range, config_from_dict
 
 __all__ = ["SensorConfig", "SensorOutput", "FrameDraw", "draw_frame_params", "apply_sensor"]
 
@@ -94,6 +94,7 @@ class SensorConfig:
     max_range_m: float = 1.0
 
     def __post_init__(self) -> None:
+        check_fields(self, "sensor")
         check_range("sensor.albedo_floor", self.albedo_floor, 1e-3, 10.0)
         check_range("sensor.albedo_object", self.albedo_object, 1e-3, 10.0)
         check_number("sensor.range_ref_m", self.range_ref_m, 1e-3)

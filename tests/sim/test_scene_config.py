@@ -33,7 +33,7 @@ def test_defaults_are_table_one():
         ("scene", "camera_height_m", [0.4, 0.2], "min 0.4 is above max 0.2"),
         ("scene", "largest_dim_m", [0.1, 0.04], "above max"),
         ("scene", "n_objects", [5, 2], "above max"),
-        ("scene", "n_objects", [0.5, 2], "whole numbers"),
+        ("scene", "n_objects", [0.5, 2], "whole number"),
         ("scene", "shapes", ["box", "blob"], "unknown"),
         ("scene", "min_thickness_m", 0.05, "above the smallest largest_dim_m"),
         ("scene", "colour", 1, "unknown scene keys"),
