@@ -12,9 +12,10 @@ import os
 import sys
 from pathlib import Path
 
-from edge.cliutil import add_version, print_json, run
+from edge.cliutil import add_version, cli_message, flag_names, print_json, run
 from edge.errors import ConfigError
-from sim.dataset import simulate
+from edge.io.paths import check_input_file, check_outputs
+from sim.dataset import MANIFEST, simulate
 from sim.frames_range import parse_range
 
 __all__ = ["main"]
@@ -56,18 +57,59 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+SIM_MODULES = ("open3d", "mujoco", "scipy")  # the 'sim' extra (pyproject.toml optional-dependencies)
+
+
+def require_modules(modules: tuple[str, ...], extra: str) -> None:
+    """One line naming the pip extra when a module of ``extra`` is not installed.
+
+    A local stand-in for a shared helper: found, not imported (open3d takes a second to import,
+    and the pool workers import it themselves; a broken install fails their first task).
+    """
+    import importlib.util
+
+    missing = []
+    for name in modules:
+        try:
+            found = importlib.util.find_spec(name) is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            missing.append(name)
+    if missing:
+        raise ConfigError(
+            f"{PROG} needs {', '.join(missing)}, from the optional extra '{extra}': pip install 'depthseg[{extra}]'"
+        )
+
+
+MAX_CONFIG_BYTES = 1 << 20  # a simulator config is a few hundred bytes; more is not a config
+
+
 def _load_config(path: str | None):
+    """The `SimConfig` of ``--config``: a JSON object in a small UTF-8 text file, else one line."""
     from sim.generate import SimConfig
 
     if path is None:
         return SimConfig()
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"--config {p}: no such file")
+    p = check_input_file(path, "config")
+    size = p.stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise ConfigError(f"`config` {p}: {size} bytes is too large for a simulator config (limit {MAX_CONFIG_BYTES})")
     try:
-        d = json.loads(p.read_text())
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"`config` {p}: not a UTF-8 text file; give a JSON file") from None
+    try:
+        d = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ConfigError(f"--config {p}: not valid JSON ({exc})") from None
+        raise ConfigError(f"`config` {p}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise ConfigError(f"`config` {p}: JSON nested too deeply to be a simulator config") from None
+    except ValueError:  # Python refuses integers of more than 4300 digits
+        raise ConfigError(f"`config` {p}: holds a number too long to be a setting") from None
+    if not isinstance(d, dict):
+        kind = {list: "an array", str: "a string", type(None): "null", bool: "a boolean"}.get(type(d), "a number")
+        raise ConfigError(f"`config` {p}: must hold a JSON object {{\"scene\": ...}}, not {kind}")
     return SimConfig.from_dict(d)
 
 
@@ -80,18 +122,27 @@ def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
 
+    flags = flag_names(parser)
+
+    def warn(message: str) -> None:
+        print(f"{PROG}: warning: {cli_message(message, flags)}", file=sys.stderr)
+
     def body() -> int:
+        require_modules(SIM_MODULES, "sim")
+        config = _load_config(args.config)
+        # The folder's manifest stands for every file written into it (shards share its folder).
+        check_outputs({"out": Path(args.out) / MANIFEST}, {"config": args.config, "objects": args.objects})
         summary = simulate(
             out=args.out,
             frames=args.frames,
             seed=args.seed,
             workers=args.workers,
-            config=_load_config(args.config),
+            config=config,
             objects=args.objects,
             shard_frames=args.shard_frames,
             ray=args.ray,
             frames_range=None if args.frames_range is None else parse_range(args.frames_range),
-            on_warning=lambda m: print(f"{PROG}: warning: {m}", file=sys.stderr),
+            on_warning=warn,
         )
         if args.json:
             print_json(summary)

@@ -21,17 +21,19 @@ import queue
 import re
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 from edge.cliutil import progress
-from edge.errors import ConfigError, DataError
+from edge.errors import ConfigError, DataError, DepthsegError
 from edge.provenance import provenance
 
-__all__ = ["simulate", "shard_name", "plan_shards", "MANIFEST"]
+__all__ = ["simulate", "shard_name", "plan_shards", "iter_shards", "check_size", "usable_cores", "MANIFEST", "MAX_FRAMES",
+           "MAX_SHARDS"]
 
 TOOL = "depthseg-sim"  # recorded in the manifest
+SIM_EXTRA = "install the simulator extra: pip install 'depthseg[sim]'"
 
 MANIFEST = "manifest.json"
 _SHARD_RE = re.compile(r"^frames_(\d{8})_(\d{8})\.mcap$")
@@ -42,9 +44,47 @@ def shard_name(start: int, stop: int) -> str:
     return f"frames_{start:08d}_{stop:08d}.mcap"
 
 
+# Shard names hold 8-digit frame numbers, and the manifest keeps one entry per shard: both bound
+# a dataset (a bigger one is several --out folders with different seeds).
+MAX_FRAMES = 99_999_999
+MAX_SHARDS = 100_000
+MANIFEST_EVERY_S = 10.0
+MAX_SEED = 2**128  # rewrite the manifest at most this often while shards complete
+
+
 def plan_shards(frames: int, shard_frames: int) -> list[tuple[int, int]]:
     """[start, stop) of every shard: shard k holds frames [k*K, min((k+1)*K, N))."""
-    return [(s, min(s + shard_frames, frames)) for s in range(0, frames, shard_frames)]
+    return list(iter_shards(frames, shard_frames))
+
+
+def iter_shards(frames: int, shard_frames: int, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, int]]:
+    """The shards of `plan_shards` lying in frames [start, stop), one at a time (nothing O(frames))."""
+    stop = frames if stop is None else stop
+    for s in range(start, stop, shard_frames):
+        yield s, min(s + shard_frames, frames)
+
+
+def check_size(frames: int, shard_frames: int) -> None:
+    """Refuse a dataset larger than the shard names and the manifest can describe."""
+    if frames > MAX_FRAMES:
+        raise ConfigError(
+            f"`frames` {frames} is above the limit of {MAX_FRAMES} frames per output folder (8-digit shard "
+            "names); split the dataset into several `out` folders, each with its own `seed`"
+        )
+    shards = -(-frames // shard_frames)
+    if shards > MAX_SHARDS:
+        raise ConfigError(
+            f"`frames` {frames} in shards of `shard_frames` {shard_frames} makes {shards} shards, above the limit "
+            f"of {MAX_SHARDS} (one manifest entry each); raise `shard_frames` to at least {-(-frames // MAX_SHARDS)}"
+        )
+
+
+def usable_cores() -> int:
+    """CPUs this process may run on (its affinity mask, as a container or taskset sets it)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(os.cpu_count() or 1, 1)
 
 
 # --------------------------------------------------------------------------- worker side
@@ -53,6 +93,27 @@ _W: dict[str, Any] = {}
 
 
 def _init_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q, pooled: bool = True) -> None:
+    """Set up a worker. In a pool, a failure is kept and raised by the worker's first task.
+
+    Why: `multiprocessing.Pool` replaces a worker whose initializer raises, forever (a missing
+    open3d would spin the pool and print a traceback per worker); a task that raises instead
+    ends the run with one line.
+    """
+    if not pooled:
+        _setup_worker(config_dict, seed, library_paths, out, q, pooled)
+        return
+    try:
+        _setup_worker(config_dict, seed, library_paths, out, q, pooled)
+    except DepthsegError as exc:
+        _W["init_error"] = type(exc)(str(exc))
+    except ImportError as exc:
+        _W["init_error"] = ConfigError(f"a worker cannot import {exc.name or 'a module'} ({exc}); {SIM_EXTRA}")
+    except Exception as exc:  # noqa: BLE001 - reported by the first task, as one line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        _W["init_error"] = DataError(f"a worker failed to start ({type(exc).__name__}: {first})")
+
+
+def _setup_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q, pooled: bool) -> None:
     from sim.generate import SimConfig
     from sim.shapes import MeshLibrary
 
@@ -76,6 +137,8 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
     from edge.io import FrameWriter
     from sim.generate import generate_frame
 
+    if "init_error" in _W:
+        raise _W["init_error"]
     start, stop = task
     t0 = time.perf_counter()
     obj = inv = pix = 0
@@ -117,6 +180,16 @@ def _prepare_out(out: Path) -> None:
         raise ConfigError(f"`out` {out}: cannot create the folder ({exc.strerror}); choose a writable path") from None
     if not os.access(out, os.W_OK | os.X_OK):
         raise ConfigError(f"`out` {out}: folder is not writable; choose a writable path")
+
+
+def _planned(name: str, frames: int, shard_frames: int) -> tuple[int, int] | None:
+    """(start, stop) if ``name`` is a shard of this dataset's plan, else None."""
+    m = _SHARD_RE.match(name)
+    if m is None:
+        return None
+    a, b = int(m.group(1)), int(m.group(2))
+    ok = a % shard_frames == 0 and a < frames and b == min(a + shard_frames, frames)
+    return (a, b) if ok else None
 
 
 def _check_manifest(out: Path, ident: dict[str, Any]) -> dict[str, Any]:
@@ -184,15 +257,29 @@ def simulate(
     if int(shard_frames) < 1:
         raise ConfigError(f"`shard_frames` must be at least 1, got {shard_frames}")
     if int(workers) < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
+        raise ConfigError(f"`workers` must be at least 1, got {workers}")
     if int(seed) < 0:
-        raise ConfigError(f"--seed must be a non-negative integer, got {seed}")
+        raise ConfigError(f"`seed` must be a non-negative integer, got {seed}")
+    if int(seed) >= MAX_SEED:
+        raise ConfigError(f"`seed` must be below 2**128, got a number of {len(str(int(seed)))} digits")
+    frames, shard_frames, workers, seed = int(frames), int(shard_frames), int(workers), int(seed)
+    check_size(frames, shard_frames)
+    if not ray:  # a local pool or a local Ray: more processes than cores only cost memory
+        cores = usable_cores()
+        if workers > cores:
+            if on_warning is not None:
+                on_warning(f"`workers` {workers} capped at the {cores} usable cores")
+            workers = cores
     config = config or SimConfig()
+    if not str(out).strip():
+        raise ConfigError("`out` is empty; name the output folder")
     out = Path(out)
     if ray is not None:
-        from sim.ray_runner import import_ray
+        from sim.ray_runner import check_address, import_ray
 
         import_ray()  # before touching --out: a missing extra is a one-line error
+        if ray:
+            check_address(ray)  # an address nobody answers on: one line now, not Ray's ten minutes of retries
     if frames_range is not None:
         from sim.frames_range import check_range
 
@@ -216,13 +303,12 @@ def simulate(
         "objects": None if library_paths is None else sorted(Path(p).name for p in library_paths),
     }
     old = _check_manifest(out, ident)
-    plan = plan_shards(int(frames), int(shard_frames))
-    wanted = {shard_name(a, b) for a, b in plan}
+    lo, hi = (0, frames) if frames_range is None else frames_range
+    n_plan = -(-(hi - lo) // shard_frames)  # lo is on a shard boundary; hi on one or at the end
     removed = 0
     if frames_range is not None:  # an array job: touch only its own shards and temporary files
-        from sim.frames_range import in_range, tmp_in_range
+        from sim.frames_range import tmp_in_range
 
-        plan = [(a, b) for a, b in plan if in_range((a, b), frames_range)]
         for p in out.iterdir():
             if tmp_in_range(p.name, frames_range):
                 p.unlink(missing_ok=True)
@@ -230,11 +316,17 @@ def simulate(
         for p in out.iterdir():
             if _TMP_RE.match(p.name):  # left by a killed run: never complete, regenerate
                 p.unlink(missing_ok=True)
-            elif _SHARD_RE.match(p.name) and p.name not in wanted:  # from a run of another length
+            elif _SHARD_RE.match(p.name) and _planned(p.name, frames, shard_frames) is None:  # another length
                 p.unlink(missing_ok=True)
                 removed += 1
-    done = {p.name for p in out.iterdir() if p.name in {shard_name(a, b) for a, b in plan}}
-    todo = [(a, b) for a, b in plan if shard_name(a, b) not in done]
+    done: set[str] = set()
+    n_done = 0
+    for p in out.iterdir():
+        shard = _planned(p.name, frames, shard_frames)
+        if shard is not None and lo <= shard[0] and shard[1] <= hi:
+            done.add(p.name)
+            n_done += shard[1] - shard[0]
+    todo = (t for t in iter_shards(frames, shard_frames, lo, hi) if shard_name(*t) not in done)  # lazy
     if frames_range is None:
         from sim.frames_range import merge_part_stats
 
@@ -263,9 +355,9 @@ def simulate(
         manifest["frames_range"] = list(frames_range)
     _write_json_atomic(manifest_path, manifest)
 
-    n_todo = sum(b - a for a, b in todo)
+    n_todo = (hi - lo) - n_done
     t0 = time.perf_counter()
-    if todo:
+    if n_todo:
         ctx = mp.get_context("spawn")  # no fork after open3d/MuJoCo threads exist
         q = ctx.Queue()
         bar = progress(total=int(frames), initial=int(frames) - n_todo, desc=TOOL, unit="frame", disable=None if show_progress is None else not show_progress)
@@ -283,10 +375,16 @@ def simulate(
         th = threading.Thread(target=pump, daemon=True)
         th.start()
 
+        last_write = [time.monotonic()]
+
         def record(stats: dict[str, Any]) -> None:
             shard_stats[stats["file"]] = stats
             manifest["shards"] = shard_stats
-            _write_json_atomic(manifest_path, manifest)
+            # Throttled: with many small shards, rewriting the manifest per shard would cost more
+            # than the frames. A shard completed but not yet recorded is read back on resume.
+            if time.monotonic() - last_write[0] >= MANIFEST_EVERY_S:
+                _write_json_atomic(manifest_path, manifest)
+                last_write[0] = time.monotonic()
             if ray is not None:
                 bar.update(stats["frames"])
 
@@ -294,17 +392,17 @@ def simulate(
             if ray is not None:
                 from sim.ray_runner import run_shards
 
-                run_shards(todo, config.to_dict(), int(seed), library_paths, str(out), record,
-                           address=ray or None, workers=int(workers))
-            elif int(workers) == 1:  # in this process: no start-up cost for small runs and tests
-                _init_worker(config.to_dict(), int(seed), library_paths, str(out), q, pooled=False)
+                run_shards(todo, config.to_dict(), seed, library_paths, str(out), record,
+                           address=ray or None, workers=workers)
+            elif workers == 1:  # in this process: no start-up cost for small runs and tests
+                _init_worker(config.to_dict(), seed, library_paths, str(out), q, pooled=False)
                 for task in todo:
                     record(_write_shard(task))
             else:
                 with ctx.Pool(
-                    min(int(workers), len(todo)),
+                    min(workers, n_plan - len(done)),
                     initializer=_init_worker,
-                    initargs=(config.to_dict(), int(seed), library_paths, str(out), q),
+                    initargs=(config.to_dict(), seed, library_paths, str(out), q),
                 ) as pool:
                     for stats in pool.imap_unordered(_write_shard, todo):
                         record(stats)
@@ -324,8 +422,8 @@ def simulate(
         "generated": n_todo,
         "resumed_shards": len(done),
         "removed_stale_shards": removed,
-        "shards": len(plan),
-        "workers": int(workers),
+        "shards": n_plan,
+        "workers": workers,
         **({"ray": ray or "local"} if ray is not None else {}),
         **({"frames_range": list(frames_range)} if frames_range is not None else {}),
         "seed": int(seed),

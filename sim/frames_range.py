@@ -41,7 +41,8 @@ def parse_range(text: str) -> tuple[int, int]:
     try:
         a, b = (int(v) for v in str(text).split(":"))
     except ValueError:
-        raise ConfigError(f"`frames_range` must be START:STOP with whole numbers, e.g. 0:1000; got '{text}'") from None
+        shown = str(text) if len(str(text)) <= 40 else str(text)[:37] + "..."
+        raise ConfigError(f"`frames_range` must be START:STOP with whole numbers, e.g. 0:1000; got '{shown}'") from None
     return a, b
 
 

@@ -24,7 +24,7 @@ from typing import Any
 
 from edge.errors import ConfigError, DataError
 
-__all__ = ["import_ray", "run_shards"]
+__all__ = ["import_ray", "check_address", "run_shards"]
 
 MAX_RETRIES = 3  # Ray re-runs a task whose worker died this many times before the run stops
 
@@ -51,11 +51,45 @@ def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_pat
     return dataset._write_shard(task)
 
 
+CONNECT_TIMEOUT_S = 5.0
+
+
+def check_address(address: str) -> None:
+    """Refuse a ``host:port`` nobody answers on, before Ray retries it for ten minutes.
+
+    ``auto`` (and any address without a port) is left to Ray, which finds a local cluster
+    through its session files and fails fast when there is none.
+    """
+    import socket
+
+    hostport = address.split("://", 1)[1] if "://" in address else address
+    host, sep, port = hostport.rpartition(":")
+    if not sep:
+        return
+    if not host:
+        raise ConfigError(f"`ray` {address}: no host name before the port; give HOST:PORT or 'auto'")
+    try:
+        port_no = int(port)
+    except ValueError:
+        raise ConfigError(f"`ray` {address}: the port '{port[:20]}' is not a number; give HOST:PORT or 'auto'") from None
+    if not 0 < port_no < 65536:
+        raise ConfigError(f"`ray` {address}: port {port_no} is outside 1-65535; give HOST:PORT or 'auto'")
+    try:
+        socket.create_connection((host.strip("[]"), port_no), timeout=CONNECT_TIMEOUT_S).close()
+    except (OSError, UnicodeError) as exc:
+        reason = exc.strerror or type(exc).__name__ if isinstance(exc, OSError) else "bad host name"
+        raise ConfigError(
+            f"`ray` {address}: no Ray cluster answers there ({reason}); start one with 'ray start --head' or "
+            "check the address"
+        ) from None
+
+
 def _connect(ray, address: str | None, workers: int) -> bool:
     """Connect to ``address`` or start a local Ray with ``workers`` CPUs; True if we started it."""
     if ray.is_initialized():
         return False
     if address:
+        check_address(address)
         try:
             ray.init(address=address, log_to_driver=False, configure_logging=False)
         except (ConnectionError, RuntimeError, ValueError) as exc:
