@@ -39,6 +39,7 @@ import numpy as np
 
 from edge.errors import DataError
 from edge.io import SIM_EPOCH_NS, FrameWriter
+from edge.io.paths import check_input_file, check_outputs
 from edge.meta import fov_intrinsics
 
 __all__ = [
@@ -196,18 +197,26 @@ _PLY_SCALARS = {
 }  # fmt: skip
 
 
+_MAX_PLY_HEADER = 1 << 20  # bytes: a royaleviewer header is ~250; parsing a huge one would take minutes
+
+
 def _parse_ply_header(fh, path: Path) -> tuple[list[tuple[str, int, list[str], bool]], int]:
-    """[(element, count, property names, has list property)], header byte length."""
-    first = fh.readline()
+    """[(element, count, property names, has list property)], number of header lines."""
+    first = fh.readline(64)
     if first.strip() != b"ply":
         raise DataError(f"{path}: not a PLY file (first line is not 'ply')")
     elements: list[tuple[str, int, list[str], bool]] = []
     fmt = None
+    n_lines = 1
     while True:
-        raw = fh.readline()
+        raw = fh.readline(_MAX_PLY_HEADER + 1 - fh.tell())
+        n_lines += 1
+        if fh.tell() > _MAX_PLY_HEADER:
+            raise DataError(f"{path}: PLY header is longer than {_MAX_PLY_HEADER} bytes (no 'end_header'); not a capture")
         if not raw:
             raise DataError(f"{path}: PLY header has no 'end_header' line (truncated file?)")
         line = raw.decode("ascii", errors="replace").strip()
+        shown = line if len(line) <= 60 else line[:57] + "..."
         if line == "end_header":
             break
         parts = line.split()
@@ -217,80 +226,126 @@ def _parse_ply_header(fh, path: Path) -> tuple[list[tuple[str, int, list[str], b
             fmt = parts[1] if len(parts) > 1 else ""
             if fmt != "ascii":
                 raise DataError(
-                    f"{path}: PLY format '{fmt}': only ASCII PLY supported; export it from royaleviewer as ASCII PLY"
+                    f"{path}: PLY format '{fmt[:20]}': only ASCII PLY supported; export it from royaleviewer as ASCII PLY"
                 )
         elif parts[0] == "element" and len(parts) == 3:
             try:
                 count = int(parts[2])
             except ValueError:
-                raise DataError(f"{path}: bad PLY header line '{line}'") from None
+                raise DataError(f"{path}: bad PLY header line '{shown}'") from None
+            if count < 0:
+                raise DataError(f"{path}: PLY element '{parts[1][:20]}' has a negative count {count}")
             elements.append((parts[1], count, [], False))
         elif parts[0] == "property" and elements:
             name, count, props, has_list = elements[-1]
             if len(parts) >= 2 and parts[1] == "list":
                 has_list = True
             elif len(parts) != 3 or parts[1] not in _PLY_SCALARS:
-                raise DataError(f"{path}: bad PLY header line '{line}'")
+                raise DataError(f"{path}: bad PLY header line '{shown}'")
             props.append(parts[-1])
             elements[-1] = (name, count, props, has_list)
         else:
-            raise DataError(f"{path}: bad PLY header line '{line}'")
+            raise DataError(f"{path}: bad PLY header line '{shown}'")
     if fmt is None:
         raise DataError(f"{path}: PLY header has no 'format' line")
-    return elements, fh.tell()
+    return elements, n_lines
+
+
+def _skip_lines(fh, count: int, chunk: int = 1 << 20) -> int:
+    """Move ``fh`` past ``count`` lines by counting newlines in blocks; returns the lines skipped."""
+    done = 0
+    while done < count:
+        pos = fh.tell()
+        block = fh.read(chunk)
+        if not block:
+            break
+        ends = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
+        if done + len(ends) >= count:
+            fh.seek(pos + int(ends[count - done - 1]) + 1)
+            return count
+        done += len(ends)
+    return done
+
+
+def _check_rows_fit(path: Path, name: str, count: int, n_props: int, left: int) -> None:
+    """Refuse an element whose rows could not fit in the ``left`` bytes of the file.
+
+    Each ASCII row holds at least one character and a separator per property (an empty row is
+    one newline): a header claiming more rows than that is damaged, and skipping them one by
+    one would spin for as long as the count says.
+    """
+    min_bytes = max(2 * n_props, 1)
+    if count > left // min_bytes:
+        raise DataError(
+            f"{path}: PLY element '{name[:20]}' declares {count} rows of {n_props} values, more than the {left} "
+            "bytes left in the file can hold (truncated file or damaged header)"
+        )
 
 
 def read_ply(path: str | Path, width: int = BLENSOR_WIDTH, height: int = BLENSOR_HEIGHT) -> PlyCapture:
-    """Parse a royaleviewer ASCII PLY (one vertex per pixel, row-major) into images."""
-    p = Path(path)
-    if not p.exists():
-        raise DataError(f"{p}: no such file")
-    if p.is_dir():
-        raise DataError(f"{p}: is a directory, expected a .ply file")
+    """Parse a royaleviewer ASCII PLY (one vertex per pixel, row-major) into images.
+
+    Every vertex row must hold exactly one value per property of the header; a ragged row is
+    an error naming its line, never values shifted into the next pixel.
+    """
+    p = check_input_file(path, "inputs")
+    if not (isinstance(width, int) and isinstance(height, int) and width > 0 and height > 0):
+        raise DataError(f"`width`/`height` must be positive whole numbers, got {width!r} x {height!r}")
+    size = p.stat().st_size
     with open(p, "rb") as fh:
-        elements, _ = _parse_ply_header(fh, p)
-        body = fh.read().decode("ascii", errors="replace").splitlines()
-    lines = iter(body)
-    vertex = None
-    for name, count, props, has_list in elements:
-        if name == "vertex":
-            vertex = (count, props)
-            block = [next(lines, None) for _ in range(count)]
-            break
+        elements, line_no = _parse_ply_header(fh, p)  # line_no: the last line read
+        vertex = None
+        for name, count, props, has_list in elements:
+            if name == "vertex":
+                vertex = (count, props, has_list)
+                break
+            if has_list:
+                raise DataError(f"{p}: PLY element '{name[:20]}' before the vertices holds lists; cannot read it")
+            _check_rows_fit(p, name, count, len(props), size - fh.tell())
+            if _skip_lines(fh, count) < count:
+                raise DataError(f"{p}: PLY is truncated in element '{name[:20]}' ({count} rows declared)")
+            line_no += count
+        if vertex is None:
+            raise DataError(f"{p}: PLY has no 'vertex' element")
+        count, props, has_list = vertex
+        n = width * height
+        if count != n:
+            raise DataError(
+                f"{p}: PLY has {count} vertices; expected {n} ({width} x {height}, one per pixel, as "
+                "royaleviewer exports a frame); pass `width`/`height` for another camera"
+            )
         if has_list:
-            raise DataError(f"{p}: PLY element '{name}' before the vertices holds lists; cannot read it")
-        for _ in range(count):
-            next(lines, None)
-    if vertex is None:
-        raise DataError(f"{p}: PLY has no 'vertex' element")
-    count, props = vertex
-    n = width * height
-    if count != n:
-        raise DataError(
-            f"{p}: PLY has {count} vertices; expected {n} ({width} x {height}, one per pixel, as "
-            "royaleviewer exports a frame); pass `width`/`height` for another camera"
-        )
-    missing = [c for c in ("x", "y", "z") if c not in props]
-    if missing:
-        raise DataError(f"{p}: PLY vertices lack properties {missing}; have {props}")
-    if any(b is None for b in block):
-        got = sum(b is not None for b in block)
-        raise DataError(f"{p}: PLY is truncated: {got} of {count} vertex lines")
-    try:
-        flat = np.array(" ".join(block).split(), dtype=np.float64)
-    except ValueError:
-        raise DataError(f"{p}: PLY vertex lines hold non-numeric values") from None
-    if flat.size != count * len(props):
-        raise DataError(
-            f"{p}: PLY vertex lines hold {flat.size} values; expected {count} x {len(props)} properties"
-        )
-    table = flat.reshape(count, len(props))
+            raise DataError(f"{p}: PLY vertices hold a list property; a royaleviewer capture has none")
+        missing = [c for c in ("x", "y", "z") if c not in props]
+        if missing:
+            raise DataError(f"{p}: PLY vertices lack properties {missing}; have {props[:20]}")
+        _check_rows_fit(p, "vertex", count, len(props), size - fh.tell())
+        table = np.empty((count, len(props)), dtype=np.float64)
+        max_row = 64 + 64 * len(props)  # bytes: a row of numbers is far shorter; bounds split()'s memory
+        for i in range(count):
+            raw = fh.readline(max_row)
+            line_no += 1
+            if not raw:
+                raise DataError(f"{p}: PLY is truncated: {i} of {count} vertex lines")
+            if len(raw) >= max_row and not raw.endswith(b"\n"):
+                raise DataError(f"{p}: line {line_no} (vertex {i}) is longer than {max_row} bytes; not a row of numbers")
+            values = raw.split()
+            if len(values) != len(props):
+                raise DataError(
+                    f"{p}: line {line_no} (vertex {i}) holds {len(values)} values; the header declares "
+                    f"{len(props)} properties ({' '.join(props[:10])})"
+                )
+            try:
+                table[i] = [float(v) for v in values]
+            except ValueError:
+                raise DataError(f"{p}: line {line_no} (vertex {i}) holds non-numeric values") from None
     col = {name: i for i, name in enumerate(props)}
     points = np.stack([table[:, col[c]] for c in ("x", "y", "z")], axis=-1).reshape(height, width, 3)
     grey = None
     for c in ("red", "grey", "gray", "intensity"):
         if c in col:
-            grey = np.clip(table[:, col[c]], 0, 255).astype(np.uint8).reshape(height, width)
+            with np.errstate(invalid="ignore"):
+                grey = np.clip(np.nan_to_num(table[:, col[c]]), 0, 255).astype(np.uint8).reshape(height, width)
             break
     return PlyCapture(p, points, grey)
 
@@ -363,9 +418,7 @@ def find_inputs(paths: Iterable[str | Path], pattern: str, what: str) -> list[Pa
     directories in natural order (scan_2 before scan_10)."""
     out: list[Path] = []
     for raw in paths:
-        p = Path(raw)
-        if not p.exists():
-            raise DataError(f"{p}: no such file or directory")
+        p = check_input_file(raw, "inputs", allow_dir=True)  # a FIFO would block the import forever
         if p.is_dir():
             found = sorted((f for f in p.glob(pattern) if f.is_file()), key=_natural_key)
             if not found:
@@ -378,7 +431,8 @@ def find_inputs(paths: Iterable[str | Path], pattern: str, what: str) -> list[Pa
     return out
 
 
-def _check_out(out: str | Path) -> Path:
+def _check_out(out: str | Path, inputs: list[Path]) -> Path:
+    """The output file, refused before any work if it is unusable or would replace an input."""
     o = Path(out)
     if o.is_dir():
         raise DataError(f"`out` {o}: is a directory; give a file name ending in .mcap")
@@ -386,6 +440,7 @@ def _check_out(out: str | Path) -> Path:
         raise DataError(f"`out` {o}: name must end in .mcap")
     if not o.parent.exists():
         raise DataError(f"`out` {o}: directory {o.parent} does not exist; create it first")
+    check_outputs({"out": o}, {"inputs": inputs})
     return o
 
 
@@ -397,7 +452,7 @@ def import_blensor(
 ) -> ImportSummary:
     """Write BlenSor scans as labelled Z-depth frames (one MCAP file, frame order = file order)."""
     files = find_inputs(inputs, "scan_*.npy", "BlenSor scans")
-    o = _check_out(out)
+    o = _check_out(out, files)
     scans = [read_blensor_scan(f) for f in files]
     bg = float(background_id) if background_id is not None else detect_background_id(scans)
     k = intrinsics or blensor_intrinsics()
@@ -454,7 +509,7 @@ def import_ply(
             with geometry, not truth (the rule goes into the scene JSON).
     """
     files = find_inputs(inputs, "*.ply", "royaleviewer PLY captures")
-    o = _check_out(out)
+    o = _check_out(out, files)
     labeller = None
     if label_above_plane_m is not None:
         from edge.baseline import Intrinsics, PlaneBaseline
@@ -584,7 +639,7 @@ def import_main(argv: list[str] | None = None) -> int:
             )
         return 0
 
-    return run(prog, body, ap)
+    return run(prog, body, ap, aliases={"inputs": "input"})
 
 
 if __name__ == "__main__":  # pragma: no cover

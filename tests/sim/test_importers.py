@@ -117,7 +117,7 @@ def test_ply_grey_goes_to_mono8_topic(tmp_path):
         ("ply\nformat ascii 1.0\nelement vertex 192\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
          + "0 zero 1\n" * 192, "non-numeric"),
         ("ply\nformat ascii 1.0\nelement vertex 192\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
-         + "0 0\n" * 192, "expected 192 x 3"),
+         + "0 0\n" * 192, "more than the 768 bytes left"),
     ],
 )  # fmt: skip
 def test_malformed_ply_is_a_one_line_data_error(tmp_path, content, message):
