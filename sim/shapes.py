@@ -542,13 +542,61 @@ class _Loaded:
     triangles: np.ndarray  # int32
 
 
+MAX_MESH_BYTES = 64 << 20  # a library object is decimated to 1,500 triangles; a bigger file is not worth the memory
+_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+
+
+def _declared_fits(path: Path) -> None:
+    """Refuse a mesh whose header declares more vertices or faces than the file can hold.
+
+    Why: open3d sizes its arrays from the header; a 30-byte OFF declaring 200 million vertices
+    takes 3.8 GB and minutes before it fails. An element needs at least a few bytes of file
+    (ASCII: a digit and a separator per value; binary: its declared sizes).
+    """
+    size = path.stat().st_size
+    if size > MAX_MESH_BYTES:
+        raise DataError(f"{path.name}: {size} bytes is above the mesh size limit of {MAX_MESH_BYTES}; decimate it first")
+    suffix = path.suffix.lower()
+    with open(path, "rb") as fh:
+        head = fh.read(65536)
+    need = 0
+    if suffix == ".ply" and head.startswith(b"ply"):
+        end = head.find(b"end_header")
+        lines = head[: end if end >= 0 else len(head)].decode("ascii", "replace").splitlines()
+        binary = any(ln.split()[:2] and ln.split()[0] == "format" and "binary" in ln for ln in lines)
+        rows: list[list[int]] = []  # [count, min bytes per row]
+        for ln in lines:
+            parts = ln.split()
+            if parts[:1] == ["element"] and len(parts) == 3 and parts[2].isdigit():
+                rows.append([int(parts[2]), 0])
+            elif parts[:1] == ["property"] and rows:
+                if binary:
+                    kind = parts[2] if len(parts) > 2 and parts[1] == "list" else (parts[1] if len(parts) > 1 else "")
+                    rows[-1][1] += _PLY_SIZES.get(kind, 1)
+                else:
+                    rows[-1][1] += 2
+        need = sum(count * max(per, 1) for count, per in rows)
+    elif suffix == ".off":
+        tokens = [t for ln in head.decode("ascii", "replace").splitlines() if not ln.lstrip().startswith("#")
+                  for t in ln.split()]
+        nums = [t for t in tokens[:8] if t.isdigit()]
+        if len(nums) >= 2:
+            need = int(nums[0]) * 6 + int(nums[1]) * 8  # "0 0 0\n" per vertex, "3 0 1 2\n" per face
+    elif suffix == ".stl" and not head.lstrip().startswith(b"solid") and len(head) >= 84:
+        need = 84 + 50 * int.from_bytes(head[80:84], "little")
+    if need > size:
+        raise DataError(f"{path.name}: header declares more vertices or faces than its {size} bytes can hold (damaged file)")
+
+
 def _read_mesh(path: Path) -> _Loaded:
     """Read and sanity-check one mesh file; raise DataError with the reason when unusable."""
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise DataError(f"{path.name}: unsupported mesh format; use one of {list(MESH_SUFFIXES)}")
+    _declared_fits(path)
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise DataError(f"{path.name}: unsupported mesh format; use one of {list(MESH_SUFFIXES)}")
     try:
         mesh = o3d.io.read_triangle_mesh(str(path))
     except Exception as exc:  # open3d raises RuntimeError on some malformed files
