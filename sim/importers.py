@@ -98,10 +98,15 @@ def read_blensor_scan(path: str | Path, width: int = BLENSOR_WIDTH, height: int 
         raise DataError(f"{p}: no such file")
     if p.is_dir():
         raise DataError(f"{p}: is a directory, expected a BlenSor scan_*.npy file")
-    try:
-        a = np.load(p, allow_pickle=False)
+    try:  # mapped, so the shape is checked before a damaged header can ask for any memory
+        a = np.load(p, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
-        raise DataError(f"{p}: not a readable .npy array ({str(exc).splitlines()[0]})") from None
+        first = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if "mmap length" in first:
+            first = "the file is shorter than its header declares: truncated or damaged"
+        raise DataError(f"{p}: not a readable .npy array ({first[:120]})") from None
+    if not isinstance(a, np.ndarray):
+        raise DataError(f"{p}: not a .npy array (an .npz archive?); give BlenSor scan_*.npy files")
     n = width * height
     if a.shape != (2, n):
         raise DataError(
@@ -110,7 +115,7 @@ def read_blensor_scan(path: str | Path, width: int = BLENSOR_WIDTH, height: int 
         )
     if not np.issubdtype(a.dtype, np.number):
         raise DataError(f"{p}: BlenSor scan has dtype {a.dtype}; expected numbers")
-    a = a.astype(np.float64, copy=False)
+    a = np.array(a, dtype=np.float64)  # read from the map into memory
     return BlensorScan(p, a[0].reshape(width, height).T.copy(), a[1].reshape(width, height).T.copy())
 
 

@@ -293,3 +293,14 @@ def test_mesh_header_declaring_more_than_the_file_holds_is_skipped(tmp_path):
     with pytest.raises(ConfigError, match="none of the 3 mesh files"):
         MeshLibrary.scan(tmp_path, on_skip=lambda p, reason: skipped.append(reason))
     assert len(skipped) == 3 and all("more vertices or faces than its" in r for r in skipped)
+
+
+def test_blensor_scan_with_a_huge_declared_shape_asks_for_no_memory(tmp_path):
+    import numpy as np
+
+    p = tmp_path / "scan_0.npy"
+    with open(p, "wb") as f:
+        np.lib.format.write_array_header_1_0(f, {"descr": "<f8", "fortran_order": False, "shape": (2, 10**10)})
+        f.write(b"\0" * 100)
+    with pytest.raises(DataError, match="shorter than its header declares"):
+        imp.read_blensor_scan(p)
