@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Ablation of the v3 default's choices (README "Ablation"): input cues x width x simulated edge model.
 # Each row: 6 epochs on the first 3,000 frames of a training set (same scenes: seed 1), then a
-# single-channel export. Data: data/train4 (tools/default_sim_config.json) and data/train_blur
+# single-channel export. Data: data/train4 (tools/ablation/train_v3_mix.json, the v3 training mix) and data/train_blur
 # (the same config with the old blurred-edge fit, tools/ablation/train_blurred_edges.json):
 #   .venv/bin/depthseg-sim --out data/train_blur --frames 3000 --seed 1 --workers 2 \
 #       --config tools/ablation/train_blurred_edges.json
