@@ -12,15 +12,54 @@ rewrites each backticked parameter that is one of the parser's destinations into
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
-from edge.errors import DepthsegError
+from edge.errors import DepthsegError, MissingExtraError
 
-__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version"]
+__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version", "require", "EXTRAS"]
+
+# pip extras of pyproject.toml [project.optional-dependencies] -> the modules they provide
+EXTRAS: dict[str, tuple[str, ...]] = {
+    "train": ("torch", "onnx", "onnxscript", "matplotlib"),
+    "sim": ("mujoco", "open3d", "scipy"),
+    "ros": ("rosbags", "foxglove"),
+    "ray": ("ray",),
+}
+
+
+def require(extra: str, modules: Iterable[str], what: str = "") -> None:
+    """Check at a command's start that ``modules`` import; else one line naming the pip extra.
+
+    Why: a base install (``pip install depthseg``) runs the edge path only; a command that needs
+    torch (training, export, a ``.pt`` model), open3d (the plane baseline) or matplotlib (plots)
+    must say which extra to install before doing any work, not fail with a traceback halfway.
+    The modules are really imported (a module that is present but broken, e.g. open3d without
+    its system library, counts as missing); a command needs them anyway.
+
+    Args:
+        extra: the pip extra that provides them (``"train"``, ``"sim"``, ...).
+        modules: top-level module names.
+        what: what needs them, for the message (e.g. ``"a .pt model"``).
+
+    Raises:
+        MissingExtraError: one line: what is missing, why it is needed, the pip command.
+    """
+    missing = []
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except (ImportError, OSError) as exc:  # OSError: a missing shared library
+            missing.append(name if isinstance(exc, ModuleNotFoundError) else f"{name} ({' '.join(str(exc).split())[:80]})")
+    if missing:
+        need = f" for {what}" if what else ""
+        raise MissingExtraError(
+            f"{', '.join(missing)} not installed{need}; install the extra: pip install 'depthseg[{extra}]'"
+        )
 
 
 def add_version(parser: argparse.ArgumentParser, prog: str) -> None:

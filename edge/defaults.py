@@ -7,13 +7,14 @@ tools that take both) and gives the one error a user sees when it is missing.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
 from edge.errors import ModelError
 
 __all__ = ["MODELS_DIR", "DEFAULT_CHECKPOINT", "DEFAULT_ONNX", "SUFFIXES", "default_model", "resolve_model",
-           "default_models"]
+           "default_models", "is_shipped_default", "user_models_dir"]
 
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_CHECKPOINT = MODELS_DIR / "default.pt"  # torch checkpoint, 3-channel (paper input)
@@ -69,3 +70,29 @@ def resolve_model(path: str | Path | None, kinds: Sequence[str] = ("onnx", "pt")
 def default_model(kind: str = "onnx") -> Path:
     """Path of the shipped model of ``kind`` ('onnx' for the edge path, 'pt' for torch tools)."""
     return resolve_model(None, kinds=(kind,))
+
+
+def is_shipped_default(path: str | Path) -> bool:
+    """Whether ``path`` is one of the shipped default model files (decided by identity, not location).
+
+    Why identity: in a source checkout the package directory is the maintainer's working tree
+    (`edge.io.paths.package_roots` is empty there), yet tuning the shipped model must still not
+    rewrite it silently; and a copy of it elsewhere is the user's own file.
+    """
+    p = Path(path)
+    for kind in SUFFIXES:
+        d = _default(kind)
+        try:
+            if p.resolve() == d.resolve() or (p.exists() and d.exists() and os.path.samefile(p, d)):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def user_models_dir() -> Path:
+    """Where commands put models derived from the shipped one: ``$XDG_DATA_HOME/depthseg/models``
+    (``~/.local/share/depthseg/models`` when unset), never the installed package."""
+    base = os.environ.get("XDG_DATA_HOME") or ""
+    root = Path(base) if base and Path(base).is_absolute() else Path.home() / ".local" / "share"
+    return root / "depthseg" / "models"

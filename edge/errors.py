@@ -14,6 +14,7 @@ __all__ = [
     "McapDataError",
     "ModelError",
     "ThresholdError",
+    "MissingExtraError",
 ]
 
 
@@ -39,3 +40,7 @@ class ModelError(DepthsegError):
 
 class ThresholdError(DepthsegError):
     """No decision boundary satisfies the requested objective."""
+
+
+class MissingExtraError(DepthsegError):
+    """A module of an optional extra (``pip install 'depthseg[train]'``...) that this command needs is missing."""

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 
 from edge.cliutil import add_version, print_json, progress, run
-from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, evaluate, model_label
-from edge.io import TOPIC_DEPTH, TOPIC_LABELS, open_frames
+from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, model_label
+from edge.io import TOPIC_DEPTH, TOPIC_LABELS
 from edge.metrics import ErrorBreakdown, MetricSummary
 
 PROG = "depthseg-eval"
@@ -27,7 +27,8 @@ parser = argparse.ArgumentParser(
     ),
 )
 add_version(parser, PROG)
-parser.add_argument("--model", "-m", default=None, help="model file (.onnx or .pt); default: the shipped model")
+parser.add_argument("--model", "-m", default=None,
+                    help="model file (.onnx, or .pt with the train extra); default: the shipped ONNX model")
 parser.add_argument("--data", "-d", required=True, metavar="PATH", help="labelled recording (.mcap, .bag, .db3, ROS 2 bag directory) or a directory of them")
 parser.add_argument(
     "--threshold", "-t", type=float, default=None,
@@ -166,27 +167,22 @@ def main(argv: list[str] | None = None) -> int:
 
     def body() -> int:
         from edge.baseline import PlaneBaseline
-        from edge.errors import ConfigError
-        from edge.predict import load_predictor
+        from edge.commands import evaluate_model
 
-        if args.threads < 1:
-            raise ConfigError(f"--threads must be >= 1, got {args.threads}")
-        base = PlaneBaseline(height_threshold_m=args.baseline_height, median_px=args.baseline_median) if args.baseline else False
-        frames, total = open_frames(args.data, args.depth_topic, args.labels_topic, require_labels=True, depth_scale=args.depth_scale)
-        predictor = load_predictor(args.model, threads=args.threads)
-        if args.limit is not None and total is not None:
-            total = min(total, args.limit)
-        with progress(frames, total=total, desc="eval", unit="frame") as bar:
-            report = evaluate(
-                predictor, bar, threshold=args.threshold, baseline=base, figures_dir=args.figures,
-                max_figures=args.max_figures, figure_pick=args.figures_pick, limit=args.limit,
-                boundary_px=args.boundary_px, ignore_boundary=args.ignore_boundary,
-            )
+        base = PlaneBaseline(height_threshold_m=args.baseline_height, median_px=args.baseline_median) if args.baseline else None
+        report = evaluate_model(
+            args.data, args.model, threshold=args.threshold, baseline=base, figures=args.figures,
+            max_figures=args.max_figures, figures_pick=args.figures_pick, depth_topic=args.depth_topic,
+            labels_topic=args.labels_topic, depth_scale=args.depth_scale, limit=args.limit, threads=args.threads,
+            boundary_px=args.boundary_px,
+            ignore_boundary=args.ignore_boundary,
+            wrap=lambda frames, total: progress(frames, total=total, desc="eval", unit="frame"),
+        )
         if args.json:
             print_json(report.to_dict())
         else:
-            print(f"model: {predictor.name}")
-            print(format_table(report, model_label(predictor.meta)))
+            print(f"model: {report.model}")
+            print(format_table(report, model_label(report.meta)))
         return 0
 
     return run(PROG, body, parser)

@@ -30,7 +30,7 @@ import numpy as np
 
 from edge.baseline import PlaneBaseline, intrinsics_for
 from edge.errors import ConfigError, DataError, ModelError
-from edge.infer import Predictor
+from edge.infer import Predictor, check_logits
 from edge.io import Frame, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.metrics import (
@@ -77,6 +77,7 @@ class EvalReport:
     ignore_boundary_px: int | None = None  # void band width when --ignore-boundary was asked for
     ignore_boundary: MetricSummary | None = None  # None also when no frame had a pixel outside the band
     baseline_ignore_boundary: MetricSummary | None = None
+    meta: ModelMeta | None = None  # the model's metadata (not in `to_dict`: the model file has it)
 
     @property
     def frames(self) -> int:
@@ -270,9 +271,10 @@ def evaluate(
         if label.shape != depth.shape:
             raise DataError(f"frame at t={fr.stamp_ns} ns: label shape {label.shape} differs from depth shape {depth.shape}")
         valid = valid_mask(depth)
-        logits = predictor.logits(depth)
+        logits = np.asarray(predictor.logits(depth))
         if logits.shape != depth.shape:
             raise ModelError(f"{predictor.name}: returned logits of shape {logits.shape} for a {depth.shape} frame")
+        check_logits(logits, getattr(predictor, "name", "model"))
         pred = predict_mask(logits, threshold)
         outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
         s = acc.add(pred, label, valid, outside_void)

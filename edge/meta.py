@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
@@ -17,10 +18,82 @@ from edge.cues import CUES
 from edge.errors import ModelError
 from edge.preprocess import STANDARDIZE_MODES
 
-__all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics"]
+__all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics", "MAX_SENSOR_SIDE", "MAX_PAD_MULTIPLE"]
 
 META_KEY = "depthseg"
 SCHEMA_VERSION = 1
+
+# Bounds on what a model file may ask for. A model's metadata is input like any other: a hostile
+# or damaged file must fail with one line, not make the preprocessing allocate gigabytes
+# (``pad_multiple`` 65536 pads every frame to 65536 x 65536 float32 = 16 GiB).
+MAX_SENSOR_SIDE = 8192  # pixels per side of the sensor frame (depth cameras: <= ~2000)
+MAX_SENSOR_PIXELS = 4096 * 4096
+MAX_PAD_MULTIPLE = 512  # FCN-8s needs 32; a pad beyond this is not a model's need but an attack
+MAX_WIDTH = 1.0  # channel width multiplier: the paper's VGG (1) is the widest; wider would allocate GBs
+MAX_PARAMS = 10**11
+MAX_TEXT = 4096  # characters of a free-text field (names, policy)
+MAX_NESTING = 32  # depth of the free-form ``training`` record
+MAX_DISTORTION = 16  # OpenCV models have at most 14 coefficients
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _bad(key: str, value: Any, want: str) -> ModelError:
+    return ModelError(f"model metadata '{key}' = {_show(value)}: {want}")
+
+
+def _int(key: str, value: Any, lo: int, hi: int) -> int:
+    """``value`` as an int in [lo, hi] (bools and floats refused: 1.5 is no pad, True no count)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise _bad(key, value, f"must be an integer in [{lo}, {hi}]")
+    v = int(value)
+    if not lo <= v <= hi:
+        raise _bad(key, value, f"must be an integer in [{lo}, {hi}]")
+    return v
+
+
+def _float(key: str, value: Any, lo: float, hi: float, open_lo: bool = False, open_hi: bool = False) -> float:
+    """``value`` as a finite float in the interval (strings, bools, NaN and infinities refused)."""
+    a, b = "(" if open_lo else "[", ")" if open_hi else "]"
+    want = f"must be a finite number in {a}{lo:g}, {hi:g}{b}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise _bad(key, value, want)
+    v = float(value)
+    if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo) or (open_hi and v == hi):
+        raise _bad(key, value, want)
+    return v
+
+
+def _str(key: str, value: Any, choices: tuple[str, ...] | None = None) -> str:
+    if not isinstance(value, str) or len(value) > MAX_TEXT:
+        raise _bad(key, value, f"must be a string of at most {MAX_TEXT} characters")
+    if choices is not None and value not in choices:
+        raise _bad(key, value, f"must be one of {list(choices)}")
+    return value
+
+
+def _bool(key: str, value: Any) -> bool:
+    # numpy bools come from older checkpoints; strings ("no") and numbers are refused
+    if type(value).__name__ not in ("bool", "bool_"):
+        raise _bad(key, value, "must be true or false")
+    return bool(value)
+
+
+def _nesting(value: Any, limit: int) -> int:
+    """Depth of nested dicts/lists in ``value``, stopping (at limit + 1) once beyond ``limit``."""
+    todo = [(value, 1)]
+    deepest = 0
+    while todo:
+        v, d = todo.pop()
+        if isinstance(v, (dict, list, tuple)):
+            deepest = max(deepest, d)
+            if deepest > limit:
+                return deepest
+            todo.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def fov_intrinsics(width: int, height: int, hfov_deg: float, vfov_deg: float) -> tuple[float, float, float, float]:
@@ -69,6 +142,28 @@ class SensorSpec:
     min_range_m: float = 0.1
     max_range_m: float = 4.0
 
+    def __post_init__(self) -> None:
+        # every field checked by type and range; numbers normalised to Python int/float
+        put = object.__setattr__
+        put(self, "name", _str("sensor.name", self.name))
+        put(self, "width", _int("sensor.width", self.width, 1, MAX_SENSOR_SIDE))
+        put(self, "height", _int("sensor.height", self.height, 1, MAX_SENSOR_SIDE))
+        if self.width * self.height > MAX_SENSOR_PIXELS:
+            raise _bad("sensor.width", self.width, f"{self.width} x {self.height} exceeds {MAX_SENSOR_PIXELS} pixels")
+        for key, lo in (("fx", 0.0), ("fy", 0.0)):
+            put(self, key, _float(f"sensor.{key}", getattr(self, key), lo, 1e7, open_lo=True))
+        for key in ("cx", "cy"):
+            put(self, key, _float(f"sensor.{key}", getattr(self, key), -1e6, 1e6))
+        dist = self.distortion
+        if isinstance(dist, (str, bytes, dict)) or not hasattr(dist, "__len__") or len(dist) > MAX_DISTORTION:
+            raise _bad("sensor.distortion", dist, f"must be a list of at most {MAX_DISTORTION} numbers")
+        put(self, "distortion", tuple(_float("sensor.distortion", v, -1e6, 1e6) for v in dist))
+        put(self, "depth", _str("sensor.depth", self.depth, ("z",)))
+        put(self, "min_range_m", _float("sensor.min_range_m", self.min_range_m, 0.0, 1e3))
+        put(self, "max_range_m", _float("sensor.max_range_m", self.max_range_m, 0.0, 1e3, open_lo=True))
+        if self.min_range_m >= self.max_range_m:
+            raise _bad("sensor.min_range_m", self.min_range_m, f"must be below max_range_m {self.max_range_m:g}")
+
 
 @dataclass(frozen=True)
 class ModelMeta:
@@ -90,18 +185,38 @@ class ModelMeta:
     version: int = SCHEMA_VERSION
 
     def __post_init__(self) -> None:
-        if self.in_channels not in (1, 3):
-            raise ModelError(f"in_channels must be 1 or 3, got {self.in_channels}")
-        if not 0.0 < float(self.threshold) < 1.0:
-            raise ModelError(f"threshold must lie in (0, 1), got {self.threshold}")
-        if self.pad_multiple < 1:
-            raise ModelError(f"pad_multiple must be >= 1, got {self.pad_multiple}")
-        if self.standardize not in STANDARDIZE_MODES:
-            raise ModelError(f"standardize must be one of {list(STANDARDIZE_MODES)}, got {self.standardize!r}")
-        object.__setattr__(self, "cues", tuple(self.cues))
-        bad = [c for c in self.cues if c not in CUES]
-        if bad or len(set(self.cues)) != len(self.cues):
-            raise ModelError(f"cues must be distinct names from {list(CUES)}, got {list(self.cues)}")
+        # Every field checked by type and range (a model file is untrusted input); one
+        # `ModelError` naming the key and the value. Numbers are normalised to Python int/float.
+        put = object.__setattr__
+        put(self, "encoder", _str("encoder", self.encoder))
+        if not self.encoder:
+            raise _bad("encoder", self.encoder, "must name an encoder, e.g. vgg16")
+        put(self, "width", _float("width", self.width, 0.0, MAX_WIDTH, open_lo=True))
+        in_ch = _int("in_channels", self.in_channels, 1, 3)
+        if in_ch not in (1, 3):
+            raise _bad("in_channels", self.in_channels, "must be 1 or 3")
+        put(self, "in_channels", in_ch)
+        put(self, "batch_norm", _bool("batch_norm", self.batch_norm))
+        put(self, "extra_skip", _bool("extra_skip", self.extra_skip))
+        put(self, "pad_multiple", _int("pad_multiple", self.pad_multiple, 1, MAX_PAD_MULTIPLE))
+        put(self, "standardize", _str("standardize", self.standardize, tuple(STANDARDIZE_MODES)))
+        cues = self.cues
+        if isinstance(cues, (str, bytes, dict)) or not hasattr(cues, "__iter__") or not hasattr(cues, "__len__") or len(cues) > len(CUES):
+            raise _bad("cues", cues, f"must be a list of distinct names from {list(CUES)}")
+        cues = tuple(cues)
+        if any(not isinstance(c, str) or c not in CUES for c in cues) or len(set(cues)) != len(cues):
+            raise _bad("cues", list(cues), f"must be a list of distinct names from {list(CUES)}")
+        put(self, "cues", cues)
+        put(self, "threshold", _float("threshold", self.threshold, 0.0, 1.0, open_lo=True, open_hi=True))
+        put(self, "threshold_policy", _str("threshold_policy", self.threshold_policy))
+        if not isinstance(self.sensor, SensorSpec):
+            raise _bad("sensor", self.sensor, "must be a sensor description (a JSON object)")
+        put(self, "params", _int("params", self.params, 0, MAX_PARAMS))
+        if not isinstance(self.training, dict):
+            raise _bad("training", self.training, "must be a JSON object")
+        if _nesting(self.training, MAX_NESTING) > MAX_NESTING:
+            raise _bad("training", "{...}", f"is nested deeper than {MAX_NESTING} levels")
+        put(self, "version", _int("version", self.version, 1, SCHEMA_VERSION))
 
     @property
     def net_channels(self) -> int:
@@ -130,14 +245,14 @@ class ModelMeta:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ModelError(f"unknown model metadata keys {unknown}; this depthseg knows {sorted(known)}")
-        sensor = d.pop("sensor", {}) or {}
+        sensor = d.pop("sensor", None)
+        sensor = {} if sensor is None else sensor
+        if not isinstance(sensor, dict):
+            raise _bad("sensor", sensor, "must be a JSON object")
         sknown = {f.name for f in fields(SensorSpec)}
         sunknown = sorted(set(sensor) - sknown)
         if sunknown:
             raise ModelError(f"unknown sensor metadata keys {sunknown}; valid: {sorted(sknown)}")
-        sensor = dict(sensor)
-        if "distortion" in sensor:
-            sensor["distortion"] = tuple(float(v) for v in sensor["distortion"])
         try:
             return cls(sensor=SensorSpec(**sensor), **d)
         except TypeError as exc:
@@ -145,10 +260,14 @@ class ModelMeta:
 
     @classmethod
     def from_json(cls, text: str) -> ModelMeta:
+        if not isinstance(text, str):
+            raise ModelError(f"model metadata must be JSON text, got {type(text).__name__}")
         try:
             d = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ModelError(f"model metadata is not valid JSON ({exc})") from None
+        except RecursionError:
+            raise ModelError(f"model metadata is nested too deeply (more than {MAX_NESTING} levels allowed)") from None
+        except ValueError as exc:  # JSONDecodeError, and integers too long to convert
+            raise ModelError(f"model metadata is not valid JSON ({' '.join(str(exc).split())[:120]})") from None
         return cls.from_dict(d)
 
     def onnx_props(self) -> dict[str, str]:

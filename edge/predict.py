@@ -22,17 +22,21 @@ def load_predictor(path: str | Path | None = None, threads: int = 2) -> Predicto
     """A `Predictor` for ``path``: .onnx via onnxruntime, .pt/.pth via torch.
 
     Args:
-        path: the model file; None = the shipped default (checkpoint first, then ONNX).
+        path: the model file; None = the shipped default: its ONNX file (no torch needed), else
+            its checkpoint.
         threads: inference threads.
 
     Raises:
         ModelError: missing, unreadable or of an unknown type.
     """
-    p = resolve_model(path, kinds=("pt", "onnx"))
+    p = resolve_model(path, kinds=("onnx", "pt"))
     suffix = p.suffix.lower()
     if suffix in SUFFIXES["onnx"]:
         return Segmenter(p, threads=threads)
     if suffix in SUFFIXES["pt"]:
+        from edge.cliutil import require
+
+        require("train", ("torch",), f"the checkpoint {p.name}")
         from edge.train.predict import TorchPredictor
 
         return TorchPredictor(p, threads=threads)

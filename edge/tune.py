@@ -28,7 +28,9 @@ equally good thresholds (the largest margin).
 
 Honesty: frames are split (deterministically by seed) into tuning and held-out frames; the
 threshold is chosen on the tuning frames only and the objective is reported on the held-out
-frames at 0.5 and at the chosen threshold, however small the gain. Held-out frames are picked
+frames at the model's stored threshold and at the chosen one, however small the gain. The
+stored threshold is kept unless the new one is better there (`TuneResult.improves`): a tuned
+0.671 is not replaced by a 0.572 that scores worse on frames it was not chosen on. Held-out frames are picked
 by systematic sampling with a seeded random phase, so their share is exact for any frame
 count; consecutive frames of a real recording are correlated, so their held-out numbers are
 optimistic there.
@@ -48,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
+from edge.infer import check_logits
 from edge.io import Frame, atomic_write
 from edge.metrics import sigmoid, threshold_logit
 from edge.preprocess import valid_mask
@@ -409,20 +412,50 @@ class TuneResult:
     def in_sample(self) -> bool:
         return self.heldout is None
 
-    def before(self) -> dict[str, Any]:
+    def stored_index(self) -> int:
+        """Edge of the grid at the model's stored threshold (exact: `tune` puts it on the grid;
+        clipped to the grid's ends for a threshold beyond sigmoid(+-16))."""
         c = self.report_curves
-        return c.point(c.index_of(0.0), self.objective)
+        x = float(np.clip(threshold_logit(self.stored_threshold), c.edges[0], c.edges[-1]))
+        i = int(np.searchsorted(c.edges, x))
+        if i > 0 and (i == len(c.edges) or x - c.edges[i - 1] < c.edges[i] - x):
+            i -= 1
+        return i
+
+    def before(self) -> dict[str, Any]:
+        """Scores at the stored threshold (what the model does now), on the report frames."""
+        return self.report_curves.point(self.stored_index(), self.objective)
 
     def after(self) -> dict[str, Any]:
         return self.report_curves.point(self.choice.index, self.objective)
 
     def current(self) -> dict[str, Any] | None:
-        """Scores at the threshold the model carried before tuning (None if it is off the grid)."""
-        c = self.report_curves
-        try:
-            return c.point(c.index_of(threshold_logit(self.stored_threshold)), self.objective)
-        except ConfigError:
-            return None
+        """Scores at the threshold the model carried before tuning (same as `before`)."""
+        return self.before()
+
+    @property
+    def improves(self) -> bool:
+        """Whether the new threshold beats the stored one on the report frames (held-out unless ``split`` 0).
+
+        For a target objective: meeting the target beats missing it; when both miss, the one
+        closer to the target is better; when both meet it, the higher optimised metric. Ties
+        keep the stored threshold.
+        """
+        if self.choice.index == self.stored_index():
+            return False
+        b, a = self.before(), self.after()
+        if self.objective.constrained:
+            if a["meets_target"] != b["meets_target"]:
+                return bool(a["meets_target"])
+            if not a["meets_target"]:
+                kind = self.objective.kind
+                return a[kind] > b[kind] + _TIE_TOL
+        return a["objective"] > b["objective"] + _TIE_TOL
+
+    @property
+    def result_threshold(self) -> float:
+        """The threshold the model should carry: the new one if it `improves`, else the stored one."""
+        return self.threshold if self.improves else self.stored_threshold
 
     def policy(self, data_name: str = "") -> str:
         """One line stored in the model beside the threshold: how it was chosen and what it bought."""
@@ -430,10 +463,12 @@ class TuneResult:
         where = "in-sample (no held-out frames)" if self.in_sample else f"held-out ({self.report_curves.frames} frames)"
         src = f" of {data_name}" if data_name else ""
         head = "PSEUDO-LABELS, not ground truth: " + self.labels + "; " if self.pseudo_labels else ""
+        if not self.improves:
+            head = f"kept the stored threshold {self.stored_threshold:.6g} (the tuned one was not better): " + head
         return (
             f"{head}depthseg-tune objective {self.objective.text} on {self.tuning.frames} frames{src} "
             f"(split {self.split:g}, seed {self.seed}); {where} {self.objective.metric} "
-            f"{b['objective']:.4f} at 0.5 -> {a['objective']:.4f} at {self.threshold:.6g}"
+            f"{b['objective']:.4f} at the stored {self.stored_threshold:.6g} -> {a['objective']:.4f} at {self.threshold:.6g}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -445,7 +480,9 @@ class TuneResult:
             "metric": self.objective.metric,
             "before": self.before(),
             "after": self.after(),
-            "current": {"stored_threshold": self.stored_threshold, "stored_policy": self.stored_policy, **(self.current() or {})},
+            "current": {"stored_threshold": self.stored_threshold, "stored_policy": self.stored_policy, **self.before()},
+            "improves": self.improves,
+            "result_threshold": self.result_threshold,
             "tuning_value": self.choice.value,
             "tuning_frames": self.tuning.frames,
             "heldout_frames": 0 if self.heldout is None else self.heldout.frames,
@@ -511,6 +548,7 @@ def tune(
         logits = np.asarray(predictor.logits(depth))
         if logits.shape != depth.shape:
             raise ModelError(f"{getattr(predictor, 'name', 'model')}: returned logits of shape {logits.shape} for a {depth.shape} frame")
+        check_logits(logits, str(getattr(predictor, "name", "model")))
         (heldout if held(used) else tuning).add(logits, label, valid_mask(depth))
         used += 1
         if limit is not None and used >= limit:
@@ -548,7 +586,7 @@ def tune(
 
 
 def plot_pr_curve(result: TuneResult, path: str | Path, title: str = "") -> Path:
-    """Precision-recall curve (per-frame means over all thresholds) with the 0.5 and chosen points; atomic PNG."""
+    """Precision-recall curve (per-frame means over all thresholds) with the stored and chosen points; atomic PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -564,9 +602,9 @@ def plot_pr_curve(result: TuneResult, path: str | Path, title: str = "") -> Path
             ax.plot(c.recall, c.precision, ls, lw=1.4, label=f"{name} frames ({c.frames})")
         c = result.report_curves
         where = "in-sample" if result.in_sample else "held-out"
-        b, a = c.index_of(0.0), result.choice.index
+        b, a = result.stored_index(), result.choice.index
         ax.plot(c.recall[b], c.precision[b], "o", ms=8, mfc="none", mec="tab:red", mew=2,
-                label=f"0.5 ({where}): P {c.precision[b]:.3f} R {c.recall[b]:.3f}")
+                label=f"stored {result.stored_threshold:.6g} ({where}): P {c.precision[b]:.3f} R {c.recall[b]:.3f}")
         ax.plot(c.recall[a], c.precision[a], "*", ms=13, color="tab:green",
                 label=f"chosen {result.threshold:.6g} ({where}): P {c.precision[a]:.3f} R {c.recall[a]:.3f}")
         if result.objective.constrained:

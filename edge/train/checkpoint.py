@@ -16,12 +16,12 @@ from typing import Any
 
 import torch
 
-from edge.errors import ModelError
+from edge.errors import ConfigError, ModelError
 from edge.io import atomic_write
 from edge.meta import ModelMeta
 from edge.train.model import FCN8s, build_model, count_parameters
 
-__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "CHECKPOINT_FORMAT"]
+__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "checkpoint_meta", "CHECKPOINT_FORMAT"]
 
 CHECKPOINT_FORMAT = "depthseg-checkpoint"
 
@@ -60,17 +60,33 @@ def read_checkpoint(path: str | Path) -> dict[str, Any]:
         ) from None
     if not isinstance(blob, dict) or blob.get("format") != CHECKPOINT_FORMAT:
         raise ModelError(f"{p}: not a depthseg checkpoint (no '{CHECKPOINT_FORMAT}' format tag)")
+    if not isinstance(blob.get("meta"), dict):
+        raise ModelError(f"{p}: checkpoint has no 'meta' record (a dict of model metadata); re-train or re-export it")
+    if not isinstance(blob.get("state_dict"), dict):
+        raise ModelError(f"{p}: checkpoint has no 'state_dict' (a dict of weights); re-train it")
     return blob
+
+
+def checkpoint_meta(path: str | Path, blob: dict[str, Any] | None = None) -> ModelMeta:
+    """The checked `ModelMeta` of a checkpoint; a `ModelError` naming the file and the bad key."""
+    blob = read_checkpoint(path) if blob is None else blob
+    try:
+        return ModelMeta.from_dict(blob["meta"])
+    except ModelError as exc:
+        raise ModelError(f"{path}: {exc}") from None
 
 
 def load_checkpoint(path: str | Path) -> tuple[FCN8s, ModelMeta, dict[str, Any]]:
     """(model in eval mode, its metadata, the raw dict)."""
     blob = read_checkpoint(path)
-    meta = ModelMeta.from_dict(blob["meta"])
-    model = build_model(meta)
+    meta = checkpoint_meta(path, blob)
+    try:
+        model = build_model(meta)
+    except ConfigError as exc:  # e.g. an encoder name this depthseg does not know
+        raise ModelError(f"{path}: {exc}") from None
     try:
         model.load_state_dict(blob["state_dict"])
-    except (RuntimeError, KeyError) as exc:
+    except (RuntimeError, KeyError, TypeError, ValueError) as exc:
         raise ModelError(f"{path}: weights do not match the architecture in its metadata ({str(exc)[:200]})") from None
     model.eval()
     return model, meta, blob

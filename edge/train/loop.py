@@ -28,7 +28,7 @@ from torch import nn
 from edge.errors import ConfigError, ModelError
 from edge.io import atomic_write, write_bytes_atomic
 from edge.meta import ModelMeta
-from edge.train.checkpoint import read_checkpoint, save_checkpoint
+from edge.train.checkpoint import checkpoint_meta, read_checkpoint, save_checkpoint
 from edge.train.data import FrameSet, make_batch
 from edge.train.distributed import Dist
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
@@ -178,21 +178,29 @@ def train(
         if not last.exists():
             raise ModelError(f"{last}: nothing to resume; start without `resume`")
         blob = read_checkpoint(last)
-        saved = ModelMeta.from_dict(blob["meta"])
+        saved = checkpoint_meta(last, blob)
         for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip", "standardize", "cues"):
             if getattr(saved, k) != getattr(meta, k):
                 raise ConfigError(
                     f"`resume`: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"
                 )
-        model.load_state_dict(blob["state_dict"])
-        opt.load_state_dict(blob["optimizer"])
-        old = blob.get("epoch_base") != 1  # checkpoints before epochs were numbered from 1
-        start_epoch = int(blob["epoch"]) + (1 if old else 0)  # 0-based index of the next epoch
-        history = list(blob.get("history", []))
-        batch_losses = list(blob.get("batch_losses", []))
-        best_loss = float(blob.get("best_val_loss") or float("inf"))
-        best_epoch = int(blob.get("best_epoch", -1)) + (1 if old else 0)
-        elapsed_before = float(blob.get("minutes", 0.0))
+        try:
+            model.load_state_dict(blob["state_dict"])
+            opt.load_state_dict(blob["optimizer"])
+            old = blob.get("epoch_base") != 1  # checkpoints before epochs were numbered from 1
+            if isinstance(blob["epoch"], bool) or not isinstance(blob["epoch"], int) or not 0 <= blob["epoch"] < 10**6:
+                raise ValueError(f"epoch {blob['epoch']!r} is not a count")
+            start_epoch = int(blob["epoch"]) + (1 if old else 0)  # 0-based index of the next epoch
+            history = list(blob.get("history", []))
+            batch_losses = [float(v) for v in blob.get("batch_losses", [])]
+            best_loss = float(blob.get("best_val_loss") or float("inf"))
+            best_epoch = int(blob.get("best_epoch", -1)) + (1 if old else 0)
+            elapsed_before = float(blob.get("minutes", 0.0))
+        except (KeyError, TypeError, ValueError, RuntimeError, OverflowError) as exc:
+            raise ModelError(
+                f"{last}: cannot resume from it ({type(exc).__name__}: {' '.join(str(exc).split())[:160]}); "
+                "start a new run with another `out`"
+            ) from None
 
     def lr_at(epoch: int) -> float:
         if cfg.lr_schedule == "constant":
@@ -271,7 +279,7 @@ def train(
     dist.close()  # waits for every rank
     if best.exists() and dist.is_main:
         blob = read_checkpoint(best)
-        bm = ModelMeta.from_dict(blob["meta"])
+        bm = checkpoint_meta(best, blob)
         rec = dict(bm.training, epochs_run=epoch, minutes=round(elapsed_before + (time.time() - t0) / 60, 2))
         model_b = build_model(bm)
         model_b.load_state_dict(blob["state_dict"])

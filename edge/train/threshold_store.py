@@ -57,10 +57,17 @@ def read_meta(path: str | Path) -> ModelMeta:
         raise ModelError(f"{p}: no such model file")
     if _kind(p) == "onnx":
         model = _load_onnx(p)
-        return ModelMeta.from_onnx_props({e.key: e.value for e in model.metadata_props})
-    from edge.train.checkpoint import read_checkpoint
+        return _onnx_meta(p, {e.key: e.value for e in model.metadata_props})
+    from edge.train.checkpoint import checkpoint_meta
 
-    return ModelMeta.from_dict(read_checkpoint(p)["meta"])
+    return checkpoint_meta(p)
+
+
+def _onnx_meta(path: Path, props: dict[str, str]) -> ModelMeta:
+    try:
+        return ModelMeta.from_onnx_props(props)
+    except ModelError as exc:
+        raise ModelError(f"{path}: {exc}") from None
 
 
 def _write_onnx(src: Path, dst: Path, threshold: float, policy: str) -> ModelMeta:
@@ -70,7 +77,7 @@ def _write_onnx(src: Path, dst: Path, threshold: float, policy: str) -> ModelMet
     props = {e.key: e.value for e in model.metadata_props}
     if META_KEY not in props:
         raise ModelError(f"{src}: ONNX model has no '{META_KEY}' metadata; export it with depthseg-export first")
-    meta = ModelMeta.from_onnx_props(props).with_(threshold=float(threshold), threshold_policy=policy)
+    meta = _onnx_meta(src, props).with_(threshold=float(threshold), threshold_policy=policy)
     props.update(meta.onnx_props())
     del model.metadata_props[:]
     for k in props:  # keep the original key order, new keys last
@@ -85,10 +92,10 @@ def _write_onnx(src: Path, dst: Path, threshold: float, policy: str) -> ModelMet
 def _write_checkpoint(src: Path, dst: Path, threshold: float, policy: str) -> ModelMeta:
     import torch
 
-    from edge.train.checkpoint import read_checkpoint
+    from edge.train.checkpoint import checkpoint_meta, read_checkpoint
 
     blob = read_checkpoint(src)
-    meta = ModelMeta.from_dict(blob["meta"]).with_(threshold=float(threshold), threshold_policy=policy)
+    meta = checkpoint_meta(src, blob).with_(threshold=float(threshold), threshold_policy=policy)
     blob["meta"] = meta.to_dict()
     with atomic_write(dst) as tmp:
         torch.save(blob, tmp)

@@ -326,8 +326,9 @@ def test_cli_tunes_a_checkpoint_and_writes_threshold_and_policy(capsys, data_dir
     assert d["objective"] == "f1" and d["heldout_frames"] == 4 and d["tuning_frames"] == 12
     assert d["before"]["threshold"] == 0.5 and d["after"]["threshold"] == d["threshold"]
     meta = ModelMeta.from_dict(read_checkpoint(out)["meta"])
-    assert meta.threshold == d["threshold"]
-    assert meta.threshold_policy == d["policy"] and meta.threshold_policy.startswith("depthseg-tune objective f1")
+    # --out always gets a model: the tuned threshold if it beats the stored one on the held-out frames
+    assert meta.threshold == d["result_threshold"] == (d["threshold"] if d["improves"] else 0.5)
+    assert meta.threshold_policy == d["policy"] and "depthseg-tune objective f1" in meta.threshold_policy
     assert ModelMeta.from_dict(read_checkpoint(tiny_pt)["meta"]).threshold == 0.5  # --out left the input alone
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -350,26 +351,29 @@ def test_threshold_survives_export_of_a_tuned_checkpoint(capsys, data_dir, tiny_
 
 
 def test_cli_tunes_onnx_in_place_with_backup_and_the_edge_reads_it(capsys, data_dir, tiny_onnx, tmp_path):
-    import shutil
+
+    from onnxgen import linear_model
 
     from edge.infer import Segmenter
 
-    model = tmp_path / "m.onnx"
-    shutil.copy(tiny_onnx, model)
+    # nearer than the frame mean = object; the stored 0.01 calls much of the table object too
+    model = linear_model(tmp_path / "m.onnx", k=4.0, threshold=0.01)
     before_props = dict(Segmenter(model, threads=1).props)
-    rc, stdout, err = _cli(capsys, "--model", model, "--data", data_dir / "labelled.mcap", "--json", "--split", "0.5")
+    # in-sample (--split 0): the chosen threshold is better than 0.5 on the frames it is judged on
+    rc, stdout, err = _cli(capsys, "--model", model, "--data", data_dir / "labelled.mcap", "--json", "--split", "0")
     assert rc == 0, err
     d = json.loads(stdout)
+    assert d["improves"] and not d["kept"]
     assert d["written"] == str(model) and d["backup"] == str(model) + ".bak"
     seg = Segmenter(model, threads=1)
     assert seg.threshold == d["threshold"] == float(seg.props["threshold"])
     assert seg.props["threshold_policy"] == d["policy"] == seg.meta.threshold_policy
-    assert ModelMeta.from_onnx_props(seg.props).with_(threshold=0.5, threshold_policy="default 0.5 (paper)") == \
+    assert ModelMeta.from_onnx_props(seg.props).with_(threshold=0.01, threshold_policy="default 0.5 (paper)") == \
         ModelMeta.from_onnx_props(before_props)  # nothing but the threshold changed
     assert {k: v for k, v in seg.props.items() if not k.startswith(("threshold", "depthseg"))} == \
         {k: v for k, v in before_props.items() if not k.startswith(("threshold", "depthseg"))}
     backup = Segmenter(Path(d["backup"]), threads=1)
-    assert backup.threshold == 0.5
+    assert backup.threshold == 0.01
     # eval and replay use the stored threshold by default
     from edge.eval_cli import main as eval_main
 
@@ -390,7 +394,7 @@ def test_pseudo_labels_are_reported_and_stored_as_such(capsys, data_dir, tiny_on
     assert "pseudo-labels" in stdout and "NOT ground truth" in stdout
     from edge.train.threshold_store import read_meta
 
-    assert read_meta(out).threshold_policy.startswith("PSEUDO-LABELS, not ground truth")
+    assert "PSEUDO-LABELS, not ground truth" in read_meta(out).threshold_policy
 
 
 def test_cli_without_labels_fails_with_one_line_naming_topics(capsys, data_dir, tiny_pt):
@@ -455,27 +459,56 @@ def test_int8_model_is_tuned_on_its_own_outputs_and_keeps_the_threshold(capsys, 
     )
 
 
-def test_without_model_the_shipped_default_is_tuned_and_both_its_files_store_it(
+def test_without_model_the_shipped_default_is_never_rewritten_its_tuned_copy_goes_to_the_user_dir(
     capsys, monkeypatch, data_dir, tiny_pt, tiny_onnx, tmp_path
 ):
     import shutil
 
+    from onnxgen import linear_model
+
     from edge import defaults
     from edge.train.threshold_store import read_meta
 
-    pt, onnx_path = tmp_path / "default.pt", tmp_path / "default.onnx"
+    pt, onnx_path = tmp_path / "default.pt", linear_model(tmp_path / "default.onnx", k=4.0, threshold=0.01)
     shutil.copy(tiny_pt, pt)
-    shutil.copy(tiny_onnx, onnx_path)
+    before = onnx_path.read_bytes(), pt.read_bytes()
     monkeypatch.setattr(defaults, "DEFAULT_CHECKPOINT", pt)
     monkeypatch.setattr(defaults, "DEFAULT_ONNX", onnx_path)
-    rc, stdout, err = _cli(capsys, "--data", data_dir / "labelled.mcap", "--json")
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    rc, stdout, err = _cli(capsys, "--data", data_dir / "labelled.mcap", "--split", "0")
+    assert rc == 0, err
+    user = tmp_path / "xdg" / "depthseg" / "models" / "default.onnx"
+    assert f"wrote threshold into {user}" in stdout and "shipped model is never rewritten" in stdout
+    assert (onnx_path.read_bytes(), pt.read_bytes()) == before  # the shipped files are untouched
+    assert not list(tmp_path.glob("*.bak"))
+    assert read_meta(user).threshold != 0.01
+    # naming the shipped file itself is the same: it is the shipped default wherever it lives
+    rc, stdout, err = _cli(capsys, "--model", onnx_path, "--data", data_dir / "labelled.mcap", "--split", "0", "--json")
     assert rc == 0, err
     d = json.loads(stdout)
-    assert d["model"] == str(onnx_path) and d["written"] == str(onnx_path)
-    assert d["also_written"] == [{"written": str(pt), "backup": str(pt) + ".bak"}]
-    assert read_meta(onnx_path).threshold == read_meta(pt).threshold == d["threshold"]
-    assert read_meta(pt).threshold_policy == d["policy"]
-    from edge.train.checkpoint import read_checkpoint
+    assert d["destination"] == "user" and d["written"] == str(user)
+    assert (onnx_path.read_bytes(), pt.read_bytes()) == before
 
-    assert ModelMeta.from_dict(read_checkpoint(str(pt) + ".bak")["meta"]).threshold == 0.5
 
+def test_the_stored_threshold_is_kept_unless_the_new_one_is_better_on_heldout_frames():
+    """Issue 11: a tuned 0.671 was replaced by 0.572 after the report called the new one worse."""
+    rng = np.random.default_rng(3)
+    items = []
+    for _ in range(12):
+        lab = (rng.random((20, 30)) < 0.3).astype(np.uint8)
+        items.append((np.where(lab > 0, 2.0, -2.0) + rng.normal(0, 1.5, lab.shape), lab))
+    frames, pred = _frame_objs(items)
+    pred.meta = ModelMeta(threshold=0.671)
+    res = tune(pred, frames, "iou", split=0.5, seed=0)
+    assert res.before()["threshold"] == pytest.approx(0.671)  # compared with the stored one, not 0.5
+    worse = res.after()["objective"] <= res.before()["objective"]
+    assert res.improves is (not worse)
+    assert res.result_threshold == (0.671 if worse else res.threshold)
+    if worse:
+        assert res.policy().startswith("kept the stored threshold 0.671")
+    # in-sample the optimum can only be as good or better; the stored optimum itself is kept
+    res0 = tune(pred, frames, "iou", split=0.0, seed=0)
+    pred.meta = ModelMeta(threshold=res0.threshold)
+    frames, _ = _frame_objs(items)
+    again = tune(pred, frames, "iou", split=0.0, seed=0)
+    assert not again.improves and again.result_threshold == pytest.approx(res0.threshold)
