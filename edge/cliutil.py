@@ -121,7 +121,8 @@ def run(
         rc = body()
         return 0 if rc is None else int(rc)
     except DepthsegError as exc:
-        return fail(prog, cli_message(str(exc), flag_names(parser, aliases)))
+        # one line whatever the message holds (a quoted library error may carry newlines)
+        return fail(prog, " ".join(cli_message(str(exc), flag_names(parser, aliases)).split()))
     except FileNotFoundError as exc:
         return fail(prog, f"{exc.filename}: no such file or directory")
     except IsADirectoryError as exc:

@@ -40,16 +40,19 @@ def model_file(model: str | Path | None) -> Path:
     return resolve_model(model, kinds=("onnx", "pt"))
 
 
-def check_output_dir(path: str | Path | None, name: str, inputs: dict[str, Any]) -> None:
-    """An output *directory* (e.g. figures): a directory or a new path, never a file, a special
-    node, an input or a place inside an input directory or the installed package."""
+def check_output_dir(path: str | Path | None, name: str, inputs: dict[str, Any], probe: str = "frame_000000.png") -> None:
+    """An output *directory* (figures, a training run): a directory or a new path, never a file,
+    a special node, an input or a place inside an input directory or the installed package.
+
+    ``probe``: a file name written inside; it must pass `check_outputs` like any output (so an
+    existing FIFO or directory of that name inside is refused too).
+    """
     if path is None:
         return
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise ConfigError(f"`{name}` {p} is an existing file, not a directory; give a directory (or a new path)")
-    # the files written inside must pass the same rule as any output
-    check_outputs({name: p / "frame_000000.png"}, inputs)
+    check_outputs({name: p / probe}, inputs)
 
 
 def _frames(wrap: Wrap | None, frames: Iterator[Frame], total: int | None, limit: int | None) -> Iterable[Frame]:

@@ -76,11 +76,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_paths(args: argparse.Namespace) -> None:
+    """Inputs readable (no FIFO), the run directory never an input nor inside one (`edge.io.paths`)."""
+    from pathlib import Path
+
+    from edge.commands import check_output_dir
+    from edge.io.paths import check_input_file
+
+    inputs = {}
+    for name in ("data", "train_dir", "val_dir"):
+        paths = getattr(args, name) or []
+        for p in paths:
+            check_input_file(p, name, allow_dir=True)
+        inputs[name] = paths
+    if args.encoder_weights is not None:
+        inputs["encoder_weights"] = check_input_file(args.encoder_weights, "encoder_weights")
+    for name in ("best.pt", "last.pt", "log.csv", "loss.png"):
+        check_output_dir(args.out, "out", inputs, probe=name)
+    last = Path(args.out) / "last.pt"
+    if args.resume and last.exists():
+        check_input_file(last, "resume")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
 
     def body() -> int:
+        check_paths(args)
+        from edge.cliutil import require
+
+        require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
         from edge.train.data import load_frames, split_indices
         from edge.train.loop import TrainConfig, train

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from edge.cliutil import require
 from edge.errors import ConfigError, ModelError
 
-__all__ = ["ExportOptions", "export_model", "export_random", "load_source", "default_out"]
+__all__ = ["ExportOptions", "export_model", "export_random", "load_source", "default_out", "check_paths"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +87,22 @@ def load_source(opts: ExportOptions):
     return model, meta.with_(params=count_parameters(model)), Path(path).stem
 
 
+def check_paths(opts: ExportOptions) -> None:
+    """Inputs readable regular files (no FIFO: it would hang), ``out`` never an input (`edge.io.paths`)."""
+    from edge import defaults
+    from edge.io.paths import check_input_file, check_outputs
+
+    model = None
+    if not opts.random_init:
+        model = opts.model if opts.model is not None else defaults.DEFAULT_CHECKPOINT
+        if opts.model is not None:
+            check_input_file(opts.model, "model")
+    for name in ("data", "calib"):
+        if getattr(opts, name) is not None:
+            check_input_file(getattr(opts, name), name, allow_dir=True)
+    check_outputs({"out": opts.out}, {"model": model, "data": opts.data, "calib": opts.calib})
+
+
 def default_out(name: str, channels: int, opts: ExportOptions) -> Path:
     return Path(f"{name}-{channels}ch{'-pre' if opts.with_preprocessing else ''}{'-int8' if opts.int8 else ''}.onnx")
 
@@ -104,15 +121,18 @@ def export_model(opts: ExportOptions) -> dict[str, Any]:
         ConfigError: contradictory or out-of-range options.
         ModelError: missing checkpoint, failed numerical check, or an int8 model that loses too much IoU.
     """
+    for name in ("check_frames", "calib_frames", "val_frames", "threads"):
+        if getattr(opts, name) < 1:
+            raise ConfigError(f"`{name}` must be >= 1, got {getattr(opts, name)}")
+    check_paths(opts)
+    require("train", ("torch", "onnx", "onnxscript"), "export")
+    import torch
+
+    from edge.io.paths import check_outputs
     from edge.sampleframes import sample_frames
     from export.onnx_export import check_against_torch, export_onnx
     from export.preproc_graph import check_against_python, export_with_preprocessing
     from export.single_channel import to_single_channel
-
-    for name in ("check_frames", "calib_frames", "val_frames", "threads"):
-        if getattr(opts, name) < 1:
-            raise ConfigError(f"`{name}` must be >= 1, got {getattr(opts, name)}")
-    import torch
 
     torch.set_num_threads(opts.threads)  # the reference forward passes: never more threads than asked
     model, meta, name = load_source(opts)
@@ -120,6 +140,8 @@ def export_model(opts: ExportOptions) -> dict[str, Any]:
     if opts.single_channel:
         model, meta = to_single_channel(model, meta)
     out = opts.out or default_out(name, meta.in_channels, opts)
+    if opts.out is None:  # the default name: checked now it is known
+        check_outputs({"out": out}, {"model": opts.model, "data": opts.data, "calib": opts.calib})
     if out.exists() and out.is_dir():
         raise ConfigError(f"`out` {out} is a directory; give a file name ending in .onnx")
     out.parent.mkdir(parents=True, exist_ok=True)

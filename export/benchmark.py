@@ -68,7 +68,9 @@ def benchmark(
         ModelError: a model file is missing or unreadable.
     """
     from edge.bench import ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
+    from edge.cliutil import require
     from edge.defaults import resolve_model
+    from edge.io.paths import check_input_file
     from edge.sampleframes import sample_frames
 
     if threads < 1:
@@ -76,6 +78,14 @@ def benchmark(
     if frames < 1:
         raise ConfigError(f"`frames` must be >= 1, got {frames}")
     archs = [parse_compare(c) for c in compare]
+    for m in models or ():
+        check_input_file(m, "model")  # a FIFO would block onnxruntime's read forever
+    if data is not None:
+        check_input_file(data, "data", allow_dir=True)
+    if archs:
+        require("train", ("torch", "onnx", "onnxscript"), "`compare` (exports the architecture in-process)")
+    if torch:
+        require("train", ("torch",), "`torch` (PyTorch eager timing)")
     paths = list(models or [resolve_model(None, kinds=("onnx",))])
     specs = [ModelSpec(p, threads=threads) for p in paths]
     sample = sample_frames(data, frames, seed)

@@ -87,6 +87,7 @@ def load_checkpoint(path: str | Path) -> tuple[FCN8s, ModelMeta, dict[str, Any]]
     try:
         model.load_state_dict(blob["state_dict"])
     except (RuntimeError, KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"{path}: weights do not match the architecture in its metadata ({str(exc)[:200]})") from None
+        why = " ".join(str(exc).split())[:200]
+        raise ModelError(f"{path}: weights do not match the architecture in its metadata ({why})") from None
     model.eval()
     return model, meta, blob
