@@ -35,9 +35,10 @@ def _is_pt(path: Path) -> bool:
 
 def model_file(model: str | Path | None) -> Path:
     """The model file to use: ``model`` checked as an input (no FIFO, no directory), or the shipped ONNX default."""
+    path = resolve_model(model, kinds=("onnx", "pt"))  # the model-specific message when it is missing
     if model is not None:
-        check_input_file(model, "model")
-    return resolve_model(model, kinds=("onnx", "pt"))
+        check_input_file(path, "model")
+    return path
 
 
 def check_output_dir(path: str | Path | None, name: str, inputs: dict[str, Any], probe: str = "frame_000000.png") -> None:

@@ -240,9 +240,9 @@ def evaluate(
     if figure_pick not in FIGURE_PICKS:
         raise ConfigError(f"unknown figure pick '{figure_pick}'; choose from {', '.join(FIGURE_PICKS)}")
     if max_figures < 0:
-        raise ConfigError(f"max_figures must be >= 0, got {max_figures}")
+        raise ConfigError(f"`max_figures` must be >= 0, got {max_figures}")
     if limit is not None and limit < 1:
-        raise ConfigError(f"limit must be >= 1 frame, got {limit}")
+        raise ConfigError(f"`limit` must be >= 1 frame, got {limit}")
     base = PlaneBaseline() if baseline is True else (baseline or None)
     fig_dir = Path(figures_dir) if figures_dir is not None else None
     if fig_dir is not None:

@@ -167,7 +167,7 @@ class Segmenter:
         shape = inputs[0].shape
         if self.with_preprocessing:
             if len(shape) != 3:
-                raise ModelError(f"{path}: a --with-preprocessing model takes [N, H, W] raw depth, input is {shape}")
+                raise ModelError(f"{path}: a with-preprocessing model (raw depth in) takes [N, H, W], input is {shape}")
             self._frame_shape = tuple(d if isinstance(d, int) else None for d in shape[1:])
         else:
             if len(shape) != 4:

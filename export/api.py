@@ -95,7 +95,7 @@ def check_paths(opts: ExportOptions) -> None:
     model = None
     if not opts.random_init:
         model = opts.model if opts.model is not None else defaults.DEFAULT_CHECKPOINT
-        if opts.model is not None:
+        if opts.model is not None and Path(opts.model).exists():  # missing: `load_source` says how to get one
             check_input_file(opts.model, "model")
     for name in ("data", "calib"):
         if getattr(opts, name) is not None:

@@ -92,25 +92,25 @@ def check_supported(meta: ModelMeta, model: nn.Module | None = None) -> None:
     """Raise a one-line `ModelError` naming what the graph cannot express for ``meta``/``model``."""
     if meta.standardize not in SUPPORTED_STANDARDIZE:
         raise ModelError(
-            f"--with-preprocessing cannot express standardize={meta.standardize!r} "
+            f"`with_preprocessing` cannot express standardize={meta.standardize!r} "
             f"(supported: {', '.join(SUPPORTED_STANDARDIZE)}); export the plain logits model instead"
         )
     bad = [c for c in meta.cues if c not in SUPPORTED_CUES]
     if bad:
         raise ModelError(
-            f"--with-preprocessing cannot compute the input cue(s) {bad} (supported: {list(SUPPORTED_CUES)}); "
+            f"`with_preprocessing` cannot compute the input cue(s) {bad} (supported: {list(SUPPORTED_CUES)}); "
             "export the plain logits model instead"
         )
     if meta.in_channels not in (1, 3):
-        raise ModelError(f"--with-preprocessing needs in_channels 1 or 3, the metadata says {meta.in_channels}")
+        raise ModelError(f"`with_preprocessing` needs in_channels 1 or 3, the metadata says {meta.in_channels}")
     s = meta.sensor
     if s.height < 1 or s.width < 1:
-        raise ModelError(f"--with-preprocessing needs the sensor's frame size, the metadata says {s.height}x{s.width}")
+        raise ModelError(f"`with_preprocessing` needs the sensor's frame size, the metadata says {s.height}x{s.width}")
     first = getattr(getattr(getattr(model, "encoder", None), "features", [None])[0], "in_channels", None)
     if model is not None and first is not None and first != meta.net_channels:
         raise ModelError(
             f"model's first conv takes {first} channels but its metadata says {meta.net_channels} "
-            f"(in_channels {meta.in_channels} + cues {list(meta.cues)}); --with-preprocessing cannot feed it"
+            f"(in_channels {meta.in_channels} + cues {list(meta.cues)}); `with_preprocessing` cannot feed it"
         )
 
 
