@@ -212,6 +212,8 @@ def tune_model(
         raise ConfigError(f"`plot` {plot}: directory {Path(plot).parent} does not exist")
     check_outputs({"out": dest if why in ("out", "user") else None, "plot": plot}, inputs)
     if dest is not None and why == "in place":
+        # rewriting in place: never inside the installed package; the plot never on the backup
+        check_outputs({"model": model_path, "model_backup": model_path.with_name(model_path.name + ".bak")}, {})
         check_outputs({"plot": plot}, {"model": [model_path, model_path.with_name(model_path.name + ".bak")]})
     if _is_pt(model_path):
         require("train", ("torch",), f"the checkpoint {model_path.name}")

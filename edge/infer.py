@@ -26,6 +26,7 @@ import numpy as np
 
 from edge.defaults import resolve_model
 from edge.errors import ConfigError, DataError, ModelError
+from edge.io.paths import check_input_file
 from edge.meta import ModelMeta
 from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
 from edge.preprocess import preprocess_batch_for, preprocess_for, valid_mask
@@ -137,6 +138,7 @@ class Segmenter:
         import onnxruntime as ort
 
         path = resolve_model(model_path, kinds=("onnx",))
+        check_input_file(path, "model")  # a FIFO would block onnxruntime's read forever
         try:
             self.session = ort.InferenceSession(
                 str(path), sess_options=session_options(threads, spin), providers=list(providers)

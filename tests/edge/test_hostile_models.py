@@ -444,3 +444,18 @@ def test_bench_compare_never_spawns_a_process(capsys, monkeypatch, tmp_path, goo
                 "--warmup", "0", "--json"])
     assert rc == 0, capsys.readouterr().err
     assert len(json.loads(capsys.readouterr().out)["models"]) == 2
+
+
+def test_tune_never_rewrites_a_model_inside_the_installed_package(capsys, monkeypatch, tmp_path, rec, good_onnx):
+    import shutil
+
+    import edge.io.paths
+
+    pkg = tmp_path / "site-packages" / "edge"
+    pkg.mkdir(parents=True)
+    model = Path(shutil.copy(good_onnx, pkg / "other.onnx"))
+    before = model.read_bytes()
+    monkeypatch.setattr(edge.io.paths, "package_roots", lambda: [pkg])
+    err = _one_line_error(capsys, _tune("--model", model, "--data", rec, "--split", "0"), "depthseg-tune")
+    assert "installed depthseg package" in err
+    assert model.read_bytes() == before and not list(pkg.glob("*.bak"))
