@@ -379,6 +379,7 @@ class _CreatesAFile:
 
 
 @pytest.mark.parametrize("tool", ["eval", "tune", "export"])
+@pytest.mark.filterwarnings("ignore:Detected pickle protocol")
 @pytest.mark.parametrize("fmt", ["torch.save", "raw pickle"])
 def test_a_pt_whose_unpickling_creates_a_file_does_not_create_it(capsys, tmp_path, rec, tool, fmt):
     import pickle
