@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.util
 import json
 import re
 import sys
@@ -32,7 +33,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
 }
 
 
-def require(extra: str, modules: Iterable[str], what: str = "") -> None:
+def require(extra: str, modules: Iterable[str], what: str = "", load: bool = True) -> None:
     """Check at a command's start that ``modules`` import; else one line naming the pip extra.
 
     Why: a base install (``pip install depthseg``) runs the edge path only; a command that needs
@@ -45,6 +46,8 @@ def require(extra: str, modules: Iterable[str], what: str = "") -> None:
         extra: the pip extra that provides them (``"train"``, ``"sim"``, ...).
         modules: top-level module names.
         what: what needs them, for the message (e.g. ``"a .pt model"``).
+        load: import each module (True) or only find it (False: for modules that are slow to
+            import and that subprocesses import themselves, such as the simulator's open3d).
 
     Raises:
         MissingExtraError: one line: what is missing, why it is needed, the pip command.
@@ -52,8 +55,11 @@ def require(extra: str, modules: Iterable[str], what: str = "") -> None:
     missing = []
     for name in modules:
         try:
-            importlib.import_module(name)
-        except (ImportError, OSError) as exc:  # OSError: a missing shared library
+            if load:
+                importlib.import_module(name)
+            elif importlib.util.find_spec(name) is None:
+                raise ModuleNotFoundError(name)
+        except (ImportError, OSError, ValueError) as exc:  # OSError: a missing shared library
             missing.append(name if isinstance(exc, ModuleNotFoundError) else f"{name} ({' '.join(str(exc).split())[:80]})")
     if missing:
         need = f" for {what}" if what else ""

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from edge.cliutil import add_version, cli_message, flag_names, print_json, run
+from edge.cliutil import add_version, cli_message, flag_names, print_json, require, run
 from edge.errors import ConfigError
 from edge.io.paths import check_input_file, check_outputs
 from sim.dataset import MANIFEST, simulate
@@ -58,28 +58,6 @@ def _parser() -> argparse.ArgumentParser:
 
 
 SIM_MODULES = ("open3d", "mujoco", "scipy")  # the 'sim' extra (pyproject.toml optional-dependencies)
-
-
-def require_modules(modules: tuple[str, ...], extra: str) -> None:
-    """One line naming the pip extra when a module of ``extra`` is not installed.
-
-    A local stand-in for a shared helper: found, not imported (open3d takes a second to import,
-    and the pool workers import it themselves; a broken install fails their first task).
-    """
-    import importlib.util
-
-    missing = []
-    for name in modules:
-        try:
-            found = importlib.util.find_spec(name) is not None
-        except (ImportError, ValueError):
-            found = False
-        if not found:
-            missing.append(name)
-    if missing:
-        raise ConfigError(
-            f"{PROG} needs {', '.join(missing)}, from the optional extra '{extra}': pip install 'depthseg[{extra}]'"
-        )
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a simulator config is a few hundred bytes; more is not a config
@@ -128,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{PROG}: warning: {cli_message(message, flags)}", file=sys.stderr)
 
     def body() -> int:
-        require_modules(SIM_MODULES, "sim")
+        require("sim", SIM_MODULES, "the simulator", load=False)  # workers import them
         config = _load_config(args.config)
         # The folder's manifest stands for every file written into it (shards share its folder).
         check_outputs({"out": Path(args.out) / MANIFEST}, {"config": args.config, "objects": args.objects})
