@@ -22,7 +22,9 @@ from typing import Any
 
 from edge.errors import DepthsegError, MissingExtraError
 
-__all__ = ["run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version", "require", "EXTRAS"]
+__all__ = [
+    "add_recording_args",
+    "run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version", "require", "EXTRAS"]
 
 # pip extras of pyproject.toml [project.optional-dependencies] -> the modules they provide
 EXTRAS: dict[str, tuple[str, ...]] = {
@@ -66,6 +68,27 @@ def require(extra: str, modules: Iterable[str], what: str = "", load: bool = Tru
         raise MissingExtraError(
             f"{', '.join(missing)} not installed{need}; install the extra: pip install 'depthseg[{extra}]'"
         )
+
+
+def add_recording_args(parser: argparse.ArgumentParser, limit_help: str = "use at most N frames") -> None:
+    """The flags every command that reads a labelled recording shares (eval, tune).
+
+    ``--depth-topic``, ``--labels-topic`` (auto-detected by `edge.io.reader`), ``--depth-scale``,
+    ``--limit`` and ``--threads``: one spelling and one help text for all of them.
+    """
+    from edge.io.frames import TOPIC_DEPTH, TOPIC_LABELS
+
+    parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: auto-detected, e.g. {TOPIC_DEPTH})")
+    parser.add_argument(
+        "--labels-topic", default=None,
+        help=f"label Image topic, mono8 nonzero = object (default: auto-detected, e.g. {TOPIC_LABELS})",
+    )
+    parser.add_argument(
+        "--depth-scale", type=float, default=1.0, metavar="S",
+        help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)",
+    )
+    parser.add_argument("--limit", type=int, default=None, metavar="N", help=limit_help)
+    parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
 
 
 def add_version(parser: argparse.ArgumentParser, prog: str) -> None:

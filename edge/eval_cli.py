@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from edge.cliutil import add_version, print_json, progress, run
+from edge.cliutil import add_recording_args, add_version, print_json, progress, run
 from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, model_label
-from edge.io import TOPIC_DEPTH, TOPIC_LABELS
 from edge.metrics import ErrorBreakdown, MetricSummary
 
 PROG = "depthseg-eval"
@@ -49,11 +48,7 @@ parser.add_argument("--baseline-height", type=float, default=0.008, metavar="M",
                     help="baseline: height above the plane that counts as object, metres (default 0.008)")
 parser.add_argument("--baseline-median", type=int, choices=(0, 3, 5), default=3, metavar="PX",
                     help="baseline: median filter on the height map, 0 (off), 3 or 5 pixels (default 3)")
-parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: auto-detected, e.g. {TOPIC_DEPTH})")
-parser.add_argument("--labels-topic", default=None, help=f"label Image topic, mono8 nonzero = object (default: auto-detected, e.g. {TOPIC_LABELS})")
-parser.add_argument("--depth-scale", type=float, default=1.0, metavar="S", help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)")
-parser.add_argument("--limit", type=int, default=None, metavar="N", help="stop after N labelled frames")
-parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
+add_recording_args(parser, limit_help="stop after N labelled frames")
 
 
 def add_boundary_args(p: argparse.ArgumentParser) -> None:

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from edge.cliutil import add_version, print_json, progress, run
-from edge.io import TOPIC_DEPTH, TOPIC_LABELS
+from edge.cliutil import add_recording_args, add_version, print_json, progress, run
 from edge.tune import OBJECTIVE_FORMS
 
 PROG = "depthseg-tune"
@@ -52,11 +51,7 @@ parser.add_argument(
 )
 parser.add_argument("--pseudo-height", type=float, default=0.008, metavar="M",
                     help="pseudo-labels: height above the plane that counts as object, metres (default 0.008)")
-parser.add_argument("--depth-topic", default=None, help=f"depth Image topic (default: {TOPIC_DEPTH}, else auto-detected)")
-parser.add_argument("--labels-topic", default=None, help=f"label Image topic (default: {TOPIC_LABELS}, else auto-detected)")
-parser.add_argument("--depth-scale", type=float, default=1.0, metavar="S", help="multiply decoded depth by S (0.001: millimetres stored as 32FC1; default 1)")
-parser.add_argument("--limit", type=int, default=None, metavar="N", help="use at most N frames")
-parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
+add_recording_args(parser, limit_help="use at most N frames")
 
 
 def _fmt_point(name: str, p: dict, metric: str) -> str:
