@@ -437,12 +437,19 @@ _GENERATORS: dict[str, Callable] = {
 }
 
 
+def _generate(generators: dict[str, Callable], what: str, kind: str, rng: np.random.Generator, largest: float,
+              side: float, params: dict[str, Any]) -> Shape:
+    """The one dispatch of both families: ``generators[kind](rng, largest, side)`` as a `Shape`
+    whose params are ``params`` followed by the generator's own."""
+    if kind not in generators:
+        raise ConfigError(f"unknown {what} '{kind}'; choose from {list(generators)}")
+    v, t, parts, own = generators[kind](rng, float(largest), float(side))
+    return Shape(kind, np.asarray(v, np.float32), np.asarray(t, np.int32), tuple(parts), {**params, **own})
+
+
 def make_shape(kind: str, rng: np.random.Generator, largest: float, thin: float) -> Shape:
     """One procedural shape of ``kind`` with largest side ``largest`` and no side under ``thin``."""
-    if kind not in _GENERATORS:
-        raise ConfigError(f"unknown shape '{kind}'; choose from {list(PROCEDURAL_KINDS)}")
-    v, t, parts, params = _GENERATORS[kind](rng, float(largest), float(thin))
-    return Shape(kind, np.asarray(v, np.float32), np.asarray(t, np.int32), tuple(parts), {"largest_m": round(float(largest), 5), **params})
+    return _generate(_GENERATORS, "shape", kind, rng, largest, thin, {"largest_m": round(float(largest), 5)})
 
 
 def random_procedural(
@@ -522,11 +529,8 @@ _THIN_GENERATORS: dict[str, Callable] = {
 
 def make_thin_shape(kind: str, rng: np.random.Generator, largest: float, thickness: float) -> Shape:
     """A flat shape of ``kind``: largest side ``largest``, flat along body z with ``thickness``."""
-    if kind not in _THIN_GENERATORS:
-        raise ConfigError(f"unknown thin shape '{kind}'; choose from {list(THIN_KINDS)}")
-    v, t, parts, params = _THIN_GENERATORS[kind](rng, float(largest), float(thickness))
-    info = {"largest_m": round(float(largest), 5), "thickness_m": round(float(thickness), 5), "thin": True, **params}
-    return Shape(kind, np.asarray(v, np.float32), np.asarray(t, np.int32), tuple(parts), info)
+    info = {"largest_m": round(float(largest), 5), "thickness_m": round(float(thickness), 5), "thin": True}
+    return _generate(_THIN_GENERATORS, "thin shape", kind, rng, largest, thickness, info)
 
 
 def random_thin(rng: np.random.Generator, largest: float, thickness: float, kinds: Sequence[str]) -> Shape:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from edge.errors import ConfigError, DataError
-from sim.shapes import PROCEDURAL_KINDS, MeshLibrary, fit_mesh, make_shape
+from sim.shapes import PROCEDURAL_KINDS, THIN_KINDS, MeshLibrary, fit_mesh, make_shape, make_thin_shape
 
 
 @pytest.mark.parametrize("kind", PROCEDURAL_KINDS)
@@ -30,6 +30,18 @@ def test_procedural_shape_size_contract(kind):
 def test_unknown_shape_is_a_config_error():
     with pytest.raises(ConfigError, match="unknown shape 'blob'"):
         make_shape("blob", np.random.default_rng(0), 0.05, 0.01)
+
+
+def test_each_family_refuses_the_others_kinds_and_lists_its_own():
+    """make_shape and make_thin_shape share one dispatch; each keeps its own kinds and message."""
+    with pytest.raises(ConfigError, match=r"unknown shape 'disc'; choose from \['box', .*'union'\]$"):
+        make_shape("disc", np.random.default_rng(0), 0.05, 0.01)
+    with pytest.raises(ConfigError, match=r"unknown thin shape 'box'; choose from \['disc', .*'lshape'\]$") as err:
+        make_thin_shape("box", np.random.default_rng(0), 0.05, 0.003)
+    assert str(list(THIN_KINDS)) in str(err.value)
+    s = make_thin_shape("disc", np.random.default_rng(0), 0.05, 0.003)
+    assert list(s.params) == ["largest_m", "thickness_m", "thin", "diameter_m"]
+    assert list(make_shape("box", np.random.default_rng(0), 0.05, 0.01).params)[0] == "largest_m"
 
 
 def test_fit_mesh_rescales_and_stretches_flat_meshes():
