@@ -3,12 +3,14 @@
 - ``scene``: the one synthetic scene generator (`replaygen.scene`: a table at 0.3 m, a box,
   dead corners and dead pixels, deterministic per frame index).
 - ``linear_onnx``: the one hand-built ONNX (`onnxgen.linear_model`, no torch needed).
-- ``tiny_pt`` / ``tiny_onnx``: the one tiny trained-format model: a random-init FCN-8s
-  (vgg11_bn, width 0.125, 3 channels, 48 x 64 sensor) as a checkpoint, and its single-channel
-  ONNX export, built once per session (an export costs seconds).
+- ``tiny_pt`` / ``tiny_onnx``: the one tiny trained-format model (`tinymodel.tiny_model`: a
+  random-init FCN-8s vgg11_bn, width 0.125, 3 channels, 48 x 64 sensor, batch-norm statistics
+  set so its logits straddle 0) as a checkpoint, and its single-channel ONNX export, built once
+  per session (an export costs seconds).
 
-Generators live in importable modules beside this file (``onnxgen``, ``replaygen``), so tests
-can also call them with other parameters.
+Generators live in importable modules beside this file (``onnxgen``, ``replaygen``,
+``tinymodel``), so tests can also call them with other parameters; a package's own fixture may
+be a thin alias of a shared one (another size, a stored threshold) and says why.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from tinymodel import TINY_META, export_checkpoint
+from tinymodel import export_checkpoint, one_torch_thread, tiny_checkpoint
 
 
 @pytest.fixture(scope="session")
@@ -37,22 +39,13 @@ def linear_onnx(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def tiny_pt(tmp_path_factory) -> Path:
-    torch = pytest.importorskip("torch")
-    from edge.train.checkpoint import save_checkpoint
-    from edge.train.model import build_model
-
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(0)
-        model = build_model(TINY_META).eval()
-    return save_checkpoint(tmp_path_factory.mktemp("tiny_model") / "tiny.pt", model, TINY_META)
+    pytest.importorskip("torch")
+    with one_torch_thread():
+        return tiny_checkpoint(tmp_path_factory.mktemp("tiny_model") / "tiny.pt")
 
 
 @pytest.fixture(scope="session")
 def tiny_onnx(tiny_pt, tmp_path_factory) -> Path:
-    torch = pytest.importorskip("torch")
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    pytest.importorskip("torch")
+    with one_torch_thread():
         return export_checkpoint(tiny_pt, tmp_path_factory.mktemp("tiny_onnx") / "tiny.onnx")
-    finally:
-        torch.set_num_threads(n)

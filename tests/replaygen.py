@@ -26,14 +26,16 @@ PERIOD = 50_000_000  # 20 fps
 KINDS = ("ros32_zero", "ros32_nan", "ros16", "fox_proto", "fox_json")
 
 
-def scene(i: int, h: int = 24, w: int = 32) -> tuple[np.ndarray, np.ndarray]:
-    """(depth metres with invalid = 0, label) of frame ``i``: a table with a box and dead corners."""
+def scene(i: int, h: int = 24, w: int = 32, box: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(depth metres with invalid = 0, label) of frame ``i``: a table with a box (none when not
+    ``box``: every other pixel as with it) and dead corners."""
     rng = np.random.default_rng([7, i])
     depth = np.full((h, w), 0.30, dtype=np.float32) + rng.normal(0, 0.002, (h, w)).astype(np.float32)
     label = np.zeros((h, w), dtype=np.uint8)
     r0, c0 = 2 + i % max(1, h - 10), 3 + (2 * i) % max(1, w - 12)
-    depth[r0 : r0 + 6, c0 : c0 + 8] -= 0.05
-    label[r0 : r0 + 6, c0 : c0 + 8] = 1
+    if box:
+        depth[r0 : r0 + 6, c0 : c0 + 8] -= 0.05
+        label[r0 : r0 + 6, c0 : c0 + 8] = 1
     depth[:2, :2] = 0.0
     depth[-1, -3:] = 0.0
     dead = rng.random((h, w)) < 0.02

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from replaygen import scene as shared_scene
 
 from edge import defaults
 from edge.errors import ConfigError, DataError, ModelError
@@ -18,20 +19,15 @@ from edge.metrics import MetricAccumulator, predict_mask
 from edge.predict import Predictor, load_predictor
 
 H, W = 64, 96
-TINY = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, threshold=0.5)
+TINY = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, threshold=0.5)  # the Oracle's
 
 
 def scene(i: int) -> tuple[np.ndarray, np.ndarray]:
-    """A flat floor at ~0.3 m with a 2-4 cm box (frame 0 has no object) and a few invalid pixels."""
-    rng = np.random.default_rng(i)
-    depth = np.full((H, W), 0.3, np.float32) + rng.normal(0, 0.001, (H, W)).astype(np.float32)
-    label = np.zeros((H, W), np.uint8)
-    if i:
-        r, c = 10 + 5 * i, 20 + 7 * i
-        label[r : r + 15, c : c + 20] = 1
-        depth[label == 1] -= 0.02 + 0.01 * (i % 3)
-    depth[:2, :3] = 0.0
-    depth[-1, -4:] = np.nan
+    """The shared scene (`replaygen.scene`) at 64 x 96: frame 0 has no object (a frame without
+    objects scores recall 1) and odd frames mark invalid pixels NaN instead of 0 (both encodings)."""
+    depth, label = shared_scene(i, H, W, box=i > 0)
+    if i % 2:
+        depth[depth == 0] = np.nan
     return depth, label
 
 
@@ -45,16 +41,11 @@ def write_frames(path: Path, n: int = 4, labels: bool = True) -> Path:
 
 
 @pytest.fixture(scope="module")
-def tiny_ckpt(tmp_path_factory) -> Path:
-    import torch
+def tiny_ckpt(tiny_pt, tmp_path_factory) -> Path:
+    """The shared ``tiny_pt`` with threshold 0.4 stored: these tests show the model's own threshold is used, not 0.5."""
+    from edge.train.threshold_store import store_threshold
 
-    from edge.train.checkpoint import save_checkpoint
-    from edge.train.model import build_model
-
-    torch.manual_seed(0)
-    p = tmp_path_factory.mktemp("model") / "tiny.pt"
-    save_checkpoint(p, build_model(TINY), TINY.with_(threshold=0.4))
-    return p
+    return store_threshold(tiny_pt, 0.4, "tests", out=tmp_path_factory.mktemp("model") / "tiny.pt")[0]
 
 
 @pytest.fixture(scope="module")

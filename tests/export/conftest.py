@@ -1,30 +1,17 @@
-"""Shared tiny exports for the export tests: each dynamo export costs seconds, so export once.
+"""Tiny exports for the export tests: each dynamo export costs seconds, so export once.
 
-Torch runs single-threaded here: on a loaded 2-core machine its OpenMP workers spin and cost
-~10x the CPU time for these tiny models. The previous setting is restored after each use.
+Torch runs single-threaded here (`tinymodel.one_torch_thread`); the previous setting is restored
+after each use.
 """
 
 from __future__ import annotations
 
-import contextlib
-
 import pytest
-import torch
-from exportgen import tiny_model
+from tinymodel import one_torch_thread, tiny_model
 
 from export.onnx_export import export_onnx
 from export.preproc_graph import export_with_preprocessing
 from export.single_channel import to_single_channel
-
-
-@contextlib.contextmanager
-def one_torch_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(n)
 
 
 @pytest.fixture(autouse=True)
@@ -35,7 +22,9 @@ def _one_torch_thread():
 
 @pytest.fixture(scope="session")
 def tiny1():
-    """(single-channel model, meta) from a 3-channel tiny vgg11_bn width 0.125."""
+    """(single-channel model, meta) of the shared tiny builder (`tinymodel.tiny_model`) at seed 1 and the
+    paper's 171 x 224 sensor, not the shared 48 x 64 ``tiny_pt``: the fixed-size with-preprocessing
+    graph below must take the 171 x 224 BlenSor and dead-pixel frames."""
     with one_torch_thread():
         return to_single_channel(*tiny_model(1, in_channels=3))
 

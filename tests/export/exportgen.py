@@ -1,9 +1,5 @@
-"""Tiny models and frames for the export tests (importable by name, like replay's replaygen).
-
-An untrained FCN-8s gives near-constant logits far from the threshold, which would make mask
-comparisons vacuous. `tiny_model` therefore sets the batch-norm statistics from a few
-synthetic frames (train-mode forward pass, cumulative average): the logits then straddle 0,
-so masks contain both classes and flips at the threshold are possible.
+"""Frames for the export tests (importable by name, like replay's replaygen); `tiny_model` is the
+shared builder of tests/tinymodel.py, re-exported here for the export tests' imports.
 """
 
 from __future__ import annotations
@@ -11,36 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import torch
-from torch import nn
+from tinymodel import tiny_model
 
-from edge.meta import ModelMeta
-from edge.preprocess import preprocess_batch_for
 from edge.sampleframes import synthetic_frames
-from edge.train.model import FCN8s, build_model, count_parameters
+
+__all__ = ["tiny_model", "dead_pixel_frames", "blensor_frames"]
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-
-
-def tiny_model(seed: int = 0, in_channels: int = 3, width: float = 0.125, **meta_kw) -> tuple[FCN8s, ModelMeta]:
-    """A tiny vgg11_bn with batch-norm statistics from frames through its own preprocessing;
-    ``meta_kw`` sets further `ModelMeta` fields (e.g. standardize, cues)."""
-    meta = ModelMeta(encoder="vgg11", width=width, batch_norm=True, in_channels=in_channels,
-                     training={"weights": "random-init + batch-norm statistics", "seed": seed, "purpose": "tests"},
-                     **meta_kw)
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        model = build_model(meta)
-    for m in model.modules():
-        if isinstance(m, nn.BatchNorm2d):
-            m.reset_running_stats()
-            m.momentum = None
-    x, _ = preprocess_batch_for(synthetic_frames(4, seed + 100).depth, meta)
-    model.train()
-    with torch.no_grad():
-        model(torch.from_numpy(x))
-    model.eval()
-    return model, meta.with_(params=count_parameters(model))
 
 
 def dead_pixel_frames(seed: int = 0) -> list[np.ndarray]:

@@ -175,18 +175,14 @@ def test_robust_height_graph_matches_numpy_in_onnxruntime(tmp_path, cue_frames):
 
 @pytest.fixture(scope="module")
 def robust_height(tmp_path_factory):
-    import torch
+    from tinymodel import one_torch_thread
 
     from export.onnx_export import export_onnx
 
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)  # as conftest.one_torch_thread (module fixtures run before the autouse one)
-    try:
+    with one_torch_thread():  # module fixtures run before the autouse one
         model, meta = _cue_model(**ROBUST_HEIGHT)
         d = tmp_path_factory.mktemp("cues")
         return model, meta, export_with_preprocessing(model, meta, d / "pre.onnx"), export_onnx(model, meta, d / "plain.onnx")
-    finally:
-        torch.set_num_threads(n)
 
 
 def test_robust_height_model_with_preprocessing_equals_the_python_path(robust_height, cue_frames):
