@@ -209,7 +209,10 @@ def _body(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    aliases = {"depth_topic": "--topic", "namespace": "--out-namespace", "address": "--serve", "port": "--serve [HOST:]PORT"}
+    aliases = {
+        "depth_topic": "--topic", "namespace": "--out-namespace", "address": "--serve", "port": "--serve [HOST:]PORT",
+        "recording": "recording",  # the positional argument
+    }
     return run(PROG, lambda: _body(args), parser, aliases=aliases)
 
 
