@@ -71,10 +71,11 @@ class SimConfig:
         fx, fy, cx, cy = (a + t * (np.array(self.intrinsics_to) - a)).round(4).tolist()
         return replace(self.camera, fx=fx, fy=fy, cx=cx, cy=cy)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, for_digest: bool = False) -> dict[str, Any]:
+        """The configuration as JSON; ``for_digest`` leaves out keys at their pre-existing neutral values."""
         cam = self.camera
         return {
-            "scene": self.scene.to_dict(),
+            "scene": self.scene.to_dict(for_digest),
             "physics": self.physics.to_dict(),
             "sensor": self.sensor.to_dict(),
             "camera": {
@@ -164,7 +165,7 @@ class SimConfig:
 
 @lru_cache(maxsize=16)
 def _digest(config: SimConfig) -> str:
-    return hashlib.sha256(json.dumps(config.to_dict(), sort_keys=True).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(config.to_dict(for_digest=True), sort_keys=True).encode()).hexdigest()[:16]
 
 
 @dataclass

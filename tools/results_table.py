@@ -26,6 +26,7 @@ SHARED = ROOT.parent / "shared" / "data"
 FAMILIES = ROOT / "tools" / "scene_families"
 CRISP = ROOT / "tools" / "test_configs" / "crisp_edges.json"
 BLURRED = ROOT / "tools" / "test_configs" / "blurred_edges.json"
+ONE_VIEW = ROOT / "tools" / "test_configs" / "one_view.json"  # test sets: one camera pose a scene, as made
 
 
 def _sim(out: str, frames: int, seed: int, config: Path | None = None) -> list[str]:
@@ -35,7 +36,7 @@ def _sim(out: str, frames: int, seed: int, config: Path | None = None) -> list[s
 
 # (name, data path, command that makes it)
 DATASETS: list[tuple[str, str, list[str]]] = [
-    ("own sim, fresh frames (default config)", "data/test_default", _sim("data/test_default", 1000, 2)),
+    ("own sim, fresh frames (default config)", "data/test_default", _sim("data/test_default", 1000, 2, ONE_VIEW)),
     ("crisp-edge sim (no PSF, no mixed pixels)", "data/test_crisp", _sim("data/test_crisp", 300, 4, CRISP)),
     ("blurred-edge sim (PSF 0.7-1.1 px, the old fit)", "data/test_blurred", _sim("data/test_blurred", 300, 4, BLURRED)),
     *[

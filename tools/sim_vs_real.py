@@ -92,7 +92,7 @@ def sim_frames(seed: int, n: int, height: float, config: Path | None = None):
 
     from sim.generate import SimConfig, generate_frame
 
-    base = SimConfig.from_dict(json.loads(config.read_text())) if config else SimConfig()
+    base = SimConfig.from_dict(json.loads(config.read_text())) if config else SimConfig.from_dict({"scene": {"views_per_scene": 1}})
     cfg = replace(base, scene=replace(base.scene, camera_height_m=(height, height)))
     for i in range(n):
         f = generate_frame(i, seed, cfg)

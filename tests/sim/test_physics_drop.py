@@ -60,17 +60,18 @@ def test_unstable_drops_are_redrawn_deterministically(monkeypatch):
         return real_drop(scene, cfg)
 
     monkeypatch.setattr(gen, "drop", flaky)
-    a = gen.generate_frame(4, 9)
+    one = gen.SimConfig.from_dict({"scene": {"views_per_scene": 1}})  # no settled-scene cache between calls
+    a = gen.generate_frame(4, 9, one)
     assert a.scene["params"]["physics"]["attempts"] == 2
     calls["n"] = 0
-    b = gen.generate_frame(4, 9)
+    b = gen.generate_frame(4, 9, one)
     np.testing.assert_array_equal(a.depth, b.depth)
 
     def always(scene, cfg):
         raise PhysicsUnstable("BADQACC (simulated)")
 
     monkeypatch.setattr(gen, "drop", always)
-    c = gen.generate_frame(4, 9)
+    c = gen.generate_frame(4, 9, one)
     assert c.scene["params"]["physics"]["fallback"] == "empty scene"
     assert c.label.sum() == 0 and c.scene["params"]["objects"] == []
 

@@ -11,7 +11,7 @@ from edge.errors import ConfigError
 from sim.generate import SimConfig, generate_frame
 from sim.views import clear_cache
 
-ONE = SimConfig.from_dict({"scene": {"n_objects": [2, 5]}})
+ONE = SimConfig.from_dict({"scene": {"n_objects": [2, 5], "views_per_scene": 1}})
 FOUR = SimConfig.from_dict({"scene": {"n_objects": [2, 5], "views_per_scene": 4}})
 
 
@@ -20,9 +20,13 @@ def _same(a, b) -> bool:
             and np.array_equal(a.clean, b.clean) and a.scene == b.scene)
 
 
-def test_default_is_one_view_with_the_old_digest():
-    assert SimConfig().scene.views_per_scene == 1
-    assert "views_per_scene" not in SimConfig().to_dict()["scene"]  # old datasets keep their digest
+def test_default_is_four_views_and_one_view_data_keep_their_digest():
+    assert SimConfig().scene.views_per_scene == 4
+    old = SimConfig.from_dict({"scene": {"n_objects": [2, 5]}})
+    # a one-view config reads back as one view, and its digest is the one it had before views existed
+    assert SimConfig.from_dict(ONE.to_dict()).scene.views_per_scene == 1
+    assert "views_per_scene" not in ONE.to_dict(for_digest=True)["scene"]
+    assert old.scene.views_per_scene == 4 and old.digest() != ONE.digest()
     assert "view" not in generate_frame(0, 1, ONE).scene["params"]
 
 
