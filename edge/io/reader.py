@@ -49,7 +49,7 @@ from mcap.stream_reader import MAGIC_SIZE, CRCValidationError, StreamReader, bre
 
 from edge import rosmsg
 from edge.errors import ConfigError, DataError, DepthsegError, McapDataError
-from edge.io.bags import is_bag, open_bag
+from edge.io.bags import bag_kind, is_bag, open_bag
 from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
 from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame, decode_scene
 from edge.io.paths import check_input_file
@@ -951,6 +951,141 @@ def _check_bag_chunks(bag_dir: Path, limit: int) -> None:
                         raise McapDataError(f"{f}: damaged at byte {d.offset} of {size}: {d.what}") from None
 
 
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_ROS1_OP_CHUNK = 5
+_INFLATE_STEP = 1 << 20  # decompressed bytes are counted in steps of this size, never kept
+
+
+def _ros1_fields(header: bytes, offset: int) -> dict[bytes, bytes]:
+    """The ``name=value`` fields of one ROS 1 record header; `_Damage` where a length overruns it."""
+    fields: dict[bytes, bytes] = {}
+    pos = 0
+    while pos < len(header):
+        if pos + 4 > len(header):
+            raise _Damage(offset, "record header ends inside a field length: corrupt")
+        (n,) = struct.unpack_from("<I", header, pos)
+        pos += 4
+        if n > len(header) - pos:
+            raise _Damage(offset, f"record header field of {n} bytes overruns its header: corrupt")
+        name, eq, value = header[pos:pos + n].partition(b"=")
+        if not eq:
+            raise _Damage(offset, "record header field without '=': corrupt")
+        fields[name] = value
+        pos += n
+    return fields
+
+
+def _ros1_inflated_size(comp: str, fh, n: int, declared: int, offset: int) -> int:
+    """How many bytes the ``n`` compressed bytes at ``fh`` inflate to, counting at most ``declared + 1``.
+
+    Streamed both ways in 1 MiB steps and nothing kept, so memory stays ~2 MiB whatever the chunk.
+    What is counted is what ``rosbags`` would inflate: ``bz2.decompress`` decodes every stream
+    (ignoring trailing bytes that are not one), so a bomb cannot hide behind a small first
+    stream; ``lz4.frame.decompress`` decodes the first frame only.
+    """
+    if comp == "bz2":
+        import bz2
+
+        new = bz2.BZ2Decompressor
+    else:
+        import lz4.frame
+
+        new = lz4.frame.LZ4FrameDecompressor
+    d = new()
+    got, left, pending, streams = 0, n, b"", 1
+    try:
+        while True:
+            if not pending and left and d.needs_input:
+                pending = fh.read(min(_INFLATE_STEP, left))
+                if not pending:
+                    raise _Damage(offset, f"file ends inside the {comp} chunk data: truncated")
+                left -= len(pending)
+            out = d.decompress(pending, max_length=min(_INFLATE_STEP, declared + 1 - got))
+            pending = b""
+            got += len(out)
+            if got > declared:
+                return got
+            if d.eof:
+                pending = d.unused_data
+                if comp != "bz2" or not (pending or left):
+                    return got
+                d, streams = new(), streams + 1
+            elif d.needs_input and not left and not out:
+                raise _Damage(offset, f"{comp} chunk data ends before its stream does: truncated or corrupt")
+    except _Damage:
+        raise
+    except Exception as exc:  # bz2/lz4 errors on corrupt data
+        if streams > 1:  # bz2.decompress ignores trailing data that is not a bz2 stream
+            return got
+        raise _Damage(
+            offset, f"{comp} chunk data is corrupt: it does not decompress ({type(exc).__name__}: {str(exc)[:120]})"
+        ) from None
+
+
+def _check_ros1_chunks(path: Path, limit: int) -> None:
+    """Inflate every compressed chunk of a ROS 1 ``.bag`` within our bounds before ``rosbags`` does.
+
+    ``rosbags`` decompresses a ROS 1 chunk (bz2, or lz4 frame format) in one call, trusting
+    nothing and allocating whatever it inflates to: a few hundred bytes can become gigabytes.
+    One pass over the records (u32 header length, header, u32 data length, data), never reading
+    past the file: each record's lengths must fit in what is left of it; a chunk (op 0x05) whose
+    header declares more than ``limit`` uncompressed bytes is refused from its header, and a
+    compressed one is read and inflated by streaming, in 1 MiB steps (nothing kept), and refused
+    once it passes its declared ``size``. Uncompressed chunks are skipped, not read, so the cost
+    is a second read and decompression of compressed bags only (roughly doubling their open
+    time); uncompressed bags cost one header read per record.
+
+    A file not starting with the ROS 1 magic is left to ``rosbags`` (its own one-line message).
+    """
+    size = path.stat().st_size
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(len(ROS1_MAGIC)) != ROS1_MAGIC:
+                return
+            pos = len(ROS1_MAGIC)
+            while pos < size:
+                start = pos
+                if size - pos < 4:
+                    raise _Damage(start, "file ends inside a record's header length: truncated")
+                (hlen,) = struct.unpack("<I", fh.read(4))
+                pos += 4
+                if hlen > size - pos - 4:
+                    raise _Damage(start, f"record header of {hlen} bytes does not fit in the file: truncated or corrupt")
+                header = fh.read(hlen)
+                (dlen,) = struct.unpack("<I", fh.read(4))
+                pos += hlen + 4
+                if dlen > size - pos:
+                    raise _Damage(start, f"record data of {dlen} bytes does not fit in the file: truncated or corrupt")
+                fields = _ros1_fields(header, start)
+                op = fields.get(b"op", b"")
+                if op[:1] == bytes([_ROS1_OP_CHUNK]) and len(op) == 1:
+                    raw_size = fields.get(b"size", b"")
+                    if len(raw_size) != 4:
+                        raise _Damage(start, "chunk header has no 4-byte size field: corrupt")
+                    (declared,) = struct.unpack("<I", raw_size)
+                    comp = fields.get(b"compression", b"none").decode("ascii", "replace")
+                    if declared > limit:
+                        raise _Damage(
+                            start,
+                            f"chunk claims {declared} bytes uncompressed, more than the {limit >> 20} MiB limit: corrupt",
+                        )
+                    if comp in ("bz2", "lz4"):
+                        here = fh.tell()
+                        if _ros1_inflated_size(comp, fh, dlen, declared, start) > declared:
+                            raise _Damage(
+                                start, f"{comp} chunk decompresses to more than the {declared} bytes its header declares: corrupt"
+                            )
+                        fh.seek(here + dlen)
+                        pos += dlen
+                        continue
+                fh.seek(dlen, os.SEEK_CUR)
+                pos += dlen
+    except _Damage as d:
+        raise McapDataError(f"{path}: damaged at byte {d.offset} of {size}: {d.what}") from None
+    except PermissionError:
+        raise McapDataError(f"{path}: permission denied") from None
+
+
 def _read_summary(path: Path):
     """(channels, schemas, message counts per channel or None); None when the summary is unusable."""
     from mcap.reader import SeekingReader
@@ -1022,6 +1157,8 @@ def open_depth_stream(
     chunk_limit = max(MAX_CHUNK_BYTES, 2 * 8 * max_frame[0] * max_frame[1])
     if p.is_dir() and is_bag(p):
         _check_bag_chunks(p, chunk_limit)
+    elif p.is_file() and bag_kind(p) == "ros1":
+        _check_ros1_chunks(p, chunk_limit)
     bag = open_bag(p)
     if bag is None:
         size = _check_file(p)

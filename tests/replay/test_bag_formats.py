@@ -71,6 +71,40 @@ def test_mcap_ros1_db3_and_bag_dir_give_identical_masks(tmp_path, invalid):
         assert s.metrics.iou == ref_sum.metrics.iou
 
 
+def recompress_ros1(src: Path, dst: Path, compression: str, chunk_threshold: int | None = None) -> Path:
+    """A ROS 1 bag rewritten by rosbags' writer with bz2 or lz4 chunks (message bytes unchanged)."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    w = Writer(dst)
+    w.set_compression(Writer.CompressionFormat.BZ2 if compression == "bz2" else Writer.CompressionFormat.LZ4)
+    if chunk_threshold is not None:
+        w.chunk_threshold = chunk_threshold
+    with Reader(src) as r, w:
+        conns = {
+            c.id: w.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
+                                   callerid=c.ext.callerid, latching=c.ext.latching)
+            for c in r.connections
+        }
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+    return dst
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_compressed_ros1_bags_pass_the_chunk_check_and_give_the_same_masks(tmp_path, compression):
+    """The bounded pre-pass over a ROS 1 bag's chunks (`_check_ros1_chunks`) accepts honest chunks,
+    several of them (a small chunk threshold), and the masks are those of the MCAP."""
+    rec = write_ros2(tmp_path / "rec.mcap", n=5)
+    ros1 = to_ros1(rec.path, tmp_path / "rec.bag")
+    packed = recompress_ros1(ros1, tmp_path / f"rec_{compression}.bag", compression, chunk_threshold=4096)
+    assert packed.read_bytes().count(f"compression={compression}".encode()) > 1
+    ref, _, _ = masks_of(rec.path)
+    masks, _, _ = masks_of(packed)
+    assert len(masks) == len(ref) == 5
+    for a, b in zip(masks, ref):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_bag_errors_are_the_same_one_liners(tmp_path):
     rec = write_ros2(tmp_path / "rec.mcap", n=2, labels=False)
     ros1 = to_ros1(rec.path, tmp_path / "rec.bag")

@@ -449,3 +449,121 @@ def test_a_bomb_inside_a_ros2_bag_directory_is_found_before_rosbags_reads_it(tmp
         tracemalloc.stop()
     assert peak < 8 << 20
     assert "bag_0.mcap: damaged at byte" in one_line(e.value) and "zstd frame claims" in str(e.value)
+
+
+# ------------------------------------------------------------------ ROS 1 .bag chunk bombs
+
+
+def _ros1_record(data: bytes, **fields: bytes) -> bytes:
+    header = b"".join(struct.pack("<I", len(k) + 1 + len(v)) + k.encode() + b"=" + v for k, v in fields.items())
+    return struct.pack("<I", len(header)) + header + struct.pack("<I", len(data)) + data
+
+
+def ros1_bag(path: Path, chunk_data: bytes, compression: str, declared: int) -> Path:
+    """``#ROSBAG V2.0``, a bag header record (op 3) and one chunk record (op 5) that lies about its size."""
+    bag_header = _ros1_record(
+        b" " * 64, op=b"\x03", index_pos=struct.pack("<Q", 0), conn_count=struct.pack("<I", 0),
+        chunk_count=struct.pack("<I", 1),
+    )
+    chunk = _ros1_record(chunk_data, op=b"\x05", compression=compression.encode(), size=struct.pack("<I", declared))
+    path.write_bytes(b"#ROSBAG V2.0\n" + bag_header + chunk)
+    return path
+
+
+def _ros1_bomb_compressor(compression: str, n_zeros: int):
+    """bz2 / lz4-frame compression of a chunk followed by ``n_zeros`` zero bytes (streamed: the zeros never exist)."""
+    if compression == "bz2":
+        import bz2
+
+        def start():
+            return bz2.BZ2Compressor(9), b""
+    else:
+        lz4_frame = pytest.importorskip("lz4.frame")
+
+        def start():
+            c = lz4_frame.LZ4FrameCompressor()
+            return c, c.begin()  # the frame header
+
+    def compress(chunk: bytes) -> bytes:
+        c, head = start()
+        return head + c.compress(chunk) + b"".join([c.compress(b) for b in _zeros(n_zeros, bytes(1 << 20))] + [c.flush()])
+
+    return compress
+
+
+def ros1_bomb_bag(path: Path, compression: str, n_zeros: int) -> Path:
+    """A well-formed, indexed ROS 1 bag (rosbags' writer) with one 16UC1 depth image, whose only
+    chunk declares its honest size but whose compressed data also holds ``n_zeros`` zero bytes:
+    rosbags' reader would inflate all of them when it reads the message."""
+    rosbag1 = pytest.importorskip("rosbags.rosbag1")
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    Image = store.types["sensor_msgs/msg/Image"]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    img = Image(header=Header(seq=0, stamp=Time(sec=1, nanosec=0), frame_id="cam"), height=2, width=2,
+                encoding="16UC1", is_bigendian=0, step=4, data=np.zeros(8, np.uint8))
+    w = rosbag1.Writer(path)
+    w.set_compression(rosbag1.Writer.CompressionFormat.BZ2 if compression == "bz2" else rosbag1.Writer.CompressionFormat.LZ4)
+    with w:
+        w.compressor = _ros1_bomb_compressor(compression, n_zeros)
+        conn = w.add_connection("/cam/depth", "sensor_msgs/msg/Image", typestore=store)
+        w.write(conn, 1_000_000_000, store.serialize_ros1(img, "sensor_msgs/msg/Image"))
+    return path
+
+
+@pytest.mark.parametrize("compression", ["bz2", "lz4"])
+def test_a_ros1_bag_chunk_lying_about_its_size_is_refused_before_rosbags_inflates_it(tmp_path, capsys, compression):
+    """rosbags inflates a ROS 1 chunk in one call (bz2.decompress / lz4.frame.decompress), trusting
+    nothing: a chunk of a few hundred kB that declares ~150 bytes inflates to 48 MB (gigabytes
+    with more zeros). Our streamed pass runs first and stops one byte past the declared size."""
+    p = ros1_bomb_bag(tmp_path / "bomb.bag", compression, 48 << 20)
+    assert p.stat().st_size < 1 << 20
+    tracemalloc.start()
+    try:
+        with pytest.raises(McapDataError) as e:
+            for _ in open_depth_stream(p):
+                pass
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    print(f"ros1 {compression} bomb: tracemalloc peak {peak / 1e6:.2f} MB")
+    assert peak < 50 << 20, peak
+    msg = one_line(e.value)
+    assert "bomb.bag: damaged at byte " in msg and f"{compression} chunk decompresses to more than the " in msg, msg
+    tracemalloc.start()
+    try:
+        rc, err = cli(capsys, p)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 50 << 20, peak
+    assert_cli_error(rc, err, "bomb.bag: damaged at byte", "bytes its header declares: corrupt")
+
+
+def test_a_ros1_bag_chunk_declaring_more_than_the_cap_is_refused_from_its_header(tmp_path, capsys):
+    import bz2
+
+    p = ros1_bag(tmp_path / "huge.bag", bz2.compress(b"\0" * 1024), "bz2", 300 << 20)
+    tracemalloc.start()
+    try:
+        with pytest.raises(McapDataError) as e:
+            open_depth_stream(p)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 50 << 20, peak
+    msg = one_line(e.value)
+    assert "huge.bag: damaged at byte" in msg and "more than the 256 MiB limit" in msg, msg
+    assert_cli_error(*cli(capsys, p), "huge.bag: damaged at byte", "256 MiB limit")
+
+
+def test_a_ros1_bag_whose_record_lengths_overrun_the_file_is_refused_without_reading_them(tmp_path):
+    p = tmp_path / "overrun.bag"
+    p.write_bytes(b"#ROSBAG V2.0\n" + struct.pack("<I", 0xFFFFFFF0) + b"op=\x05")
+    with pytest.raises(McapDataError, match=r"overrun.bag: damaged at byte 13 of 21: record header of 4294967280 bytes"):
+        open_depth_stream(p)
+    p.write_bytes(b"#ROSBAG V2.0\n" + _ros1_record(b"", op=b"\x05")[:-4] + struct.pack("<I", 1 << 30))
+    with pytest.raises(McapDataError, match=r"record data of 1073741824 bytes does not fit in the file"):
+        open_depth_stream(p)
