@@ -1,10 +1,12 @@
 #!/usr/bin/env python
-"""Score the ablation rows (tools/ablation/run_ablation.sh) on held-out simulated sets only.
+"""Score models on held-out simulated sets only: the numbers a model (or an ablation row) is chosen by.
 
 Model choice is made on simulated frames never used in training (seed 2 and 4 test sets, the
 seed 3 validation mix), never on the shared BlenSor or real frames. Prints a markdown table.
 
-    .venv/bin/python tools/ablation/eval_ablation.py [MODEL.onnx ...]
+    .venv/bin/python tools/ablation/eval_ablation.py [MODEL.onnx ...]            # ablation rows: 300 frames a set, at 0.5
+    .venv/bin/python tools/ablation/eval_ablation.py --candidates OLD.onnx NEW.onnx  # every held-out set, all frames,
+                                                                                      # each model at its stored threshold
 """
 
 from __future__ import annotations
@@ -17,20 +19,41 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 SETS = [("own sim", "data/test_default"), ("crisp edges", "data/test_crisp"), ("blurred edges", "data/test_blurred"),
         ("v3 mix (val, seed 3)", "data/val4")]
+# --candidates: every held-out simulated set of the README results table (a new default is chosen by these)
+CANDIDATE_SETS = [("own sim", "data/test_default"), ("crisp", "data/test_crisp"), ("blurred", "data/test_blurred"),
+                  *[(f, f"data/test_{f}") for f in ("thin", "table_edge", "tilted", "curved", "tray", "stacked")],
+                  ("own sim, real capture's rule", "data/test_default_geo10.mcap")]
 ROWS = [("z + height, x0.125, new edges", "runs/ablation/zh_w125/model.onnx"),
         ("z only, x0.125, new edges", "runs/ablation/z_w125/model.onnx"),
         ("z + height, x0.125, old blurred edges", "runs/ablation/zh_w125_blur/model.onnx"),
         ("z + height, x0.25, new edges", "runs/ablation/zh_w25/model.onnx")]
 
 
-def score(model: str, data: str) -> dict:
-    cmd = [str(ROOT / ".venv/bin/depthseg-eval"), "--model", model, "--data", data, "--json", "--limit", "300",
-           "--threshold", "0.5"]
+def score(model: str, data: str, ablation: bool = True) -> dict:
+    cmd = [str(ROOT / ".venv/bin/depthseg-eval"), "--model", model, "--data", data, "--json"]
+    cmd += ["--limit", "300", "--threshold", "0.5"] if ablation else []
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=True).stdout
     return json.loads(out)
 
 
+def candidates(models: list[str]) -> int:
+    """One row per held-out set, one column per model (mean IoU over frames, %), and the mean over sets."""
+    print("| held-out set | " + " | ".join(models) + " |")
+    print("|---|" + "---:|" * len(models))
+    cols: list[list[float]] = [[] for _ in models]
+    for name, data in CANDIDATE_SETS:
+        ious = [100 * score(m, data, ablation=False)["iou"] for m in models]
+        for c, v in zip(cols, ious):
+            c.append(v)
+        print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in ious) + " |", flush=True)
+    n = len(CANDIDATE_SETS) - 1  # the last set is relabelled by a rule, not the simulator's labels
+    print(f"| mean of the first {n} sets | " + " | ".join(f"{sum(c[:n]) / n:.2f}" for c in cols) + " |")
+    return 0
+
+
 def main() -> int:
+    if sys.argv[1:2] == ["--candidates"]:
+        return candidates(sys.argv[2:])
     rows = [(m, m) for m in sys.argv[1:]] or ROWS
     print("| input, width, training edges | " + " | ".join(f"{n} IoU" for n, _ in SETS) + " | FP near (own sim) |")
     print("|---|" + "---:|" * (len(SETS) + 1))
