@@ -22,9 +22,9 @@ from edge.defaults import SUFFIXES, is_shipped_default, resolve_model, user_mode
 from edge.errors import ConfigError, DataError
 from edge.evaluate import DEFAULT_BOUNDARY_PX, EvalReport, evaluate
 from edge.io import Frame
-from edge.io.paths import check_input_file, check_outputs
+from edge.io.paths import check_input_file, check_output_dir, check_outputs
 
-__all__ = ["evaluate_model", "tune_model", "model_file", "check_output_dir"]
+__all__ = ["evaluate_model", "tune_model", "model_file"]
 
 Wrap = Callable[[Iterable[Frame], int | None], Iterable[Frame]]  # (frames, total) -> frames, e.g. a progress bar
 
@@ -39,21 +39,6 @@ def model_file(model: str | Path | None) -> Path:
     if model is not None:
         check_input_file(path, "model")
     return path
-
-
-def check_output_dir(path: str | Path | None, name: str, inputs: dict[str, Any], probe: str = "frame_000000.png") -> None:
-    """An output *directory* (figures, a training run): a directory or a new path, never a file,
-    a special node, an input or a place inside an input directory or the installed package.
-
-    ``probe``: a file name written inside; it must pass `check_outputs` like any output (so an
-    existing FIFO or directory of that name inside is refused too).
-    """
-    if path is None:
-        return
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise ConfigError(f"`{name}` {p} is an existing file, not a directory; give a directory (or a new path)")
-    check_outputs({name: p / probe}, inputs)
 
 
 def _frames(wrap: Wrap | None, frames: Iterator[Frame], total: int | None, limit: int | None) -> Iterable[Frame]:
@@ -107,7 +92,7 @@ def evaluate_model(
         raise ConfigError(f"`threads` must be >= 1, got {threads}")
     model_path = model_file(model)
     check_input_file(data, "data", allow_dir=True)
-    check_output_dir(figures, "figures", {"model": model_path, "data": data})
+    check_output_dir(figures, "figures", {"model": model_path, "data": data}, probes=("frame_000000.png",))
     if _is_pt(model_path):
         require("train", ("torch",), f"the checkpoint {model_path.name}")
     if baseline:

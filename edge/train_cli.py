@@ -80,8 +80,7 @@ def check_paths(args: argparse.Namespace) -> None:
     """Inputs readable (no FIFO), the run directory never an input nor inside one (`edge.io.paths`)."""
     from pathlib import Path
 
-    from edge.commands import check_output_dir
-    from edge.io.paths import check_input_file
+    from edge.io.paths import check_input_file, check_output_dir
 
     inputs = {}
     for name in ("data", "train_dir", "val_dir"):
@@ -91,8 +90,7 @@ def check_paths(args: argparse.Namespace) -> None:
         inputs[name] = paths
     if args.encoder_weights is not None:
         inputs["encoder_weights"] = check_input_file(args.encoder_weights, "encoder_weights")
-    for name in ("best.pt", "last.pt", "log.csv", "loss.png"):
-        check_output_dir(args.out, "out", inputs, probe=name)
+    check_output_dir(args.out, "out", inputs, probes=("best.pt", "last.pt", "log.csv", "loss.png"))
     last = Path(args.out) / "last.pt"
     if args.resume and last.exists():
         check_input_file(last, "resume")

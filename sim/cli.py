@@ -10,11 +10,10 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
 from edge.cliutil import add_version, cli_message, flag_names, print_json, require, run
 from edge.errors import ConfigError
-from edge.io.paths import check_input_file, check_outputs
+from edge.io.paths import check_input_file, check_output_dir
 from sim.dataset import MANIFEST, simulate
 from sim.frames_range import parse_range
 
@@ -109,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         require("sim", SIM_MODULES, "the simulator", load=False)  # workers import them
         config = _load_config(args.config)
         # The folder's manifest stands for every file written into it (shards share its folder).
-        check_outputs({"out": Path(args.out) / MANIFEST}, {"config": args.config, "objects": args.objects})
+        check_output_dir(args.out, "out", {"config": args.config, "objects": args.objects}, probes=(MANIFEST,))
         summary = simulate(
             out=args.out,
             frames=args.frames,

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from edge.errors import ConfigError, DataError
 
-__all__ = ["check_input_file", "check_outputs", "package_roots", "special_kind"]
+__all__ = ["check_input_file", "check_output_dir", "check_outputs", "package_roots", "special_kind"]
 
 PathLike = str | os.PathLike
 
@@ -135,3 +135,27 @@ def check_outputs(outputs: Mapping[str, PathLike | None], inputs: Mapping[str, P
                     f"`{name}` {out} is inside the installed depthseg package ({root}); write to a path of your own"
                 )
         seen.append((name, resolved))
+
+
+def check_output_dir(
+    path: PathLike | None, name: str, inputs: Mapping[str, PathLike | Iterable[PathLike] | None], probes: Iterable[str]
+) -> None:
+    """An output *directory* (figures, a training run, simulated shards): `check_outputs` for the files in it.
+
+    Args:
+        path: the directory (may not exist yet; None = not written).
+        name: its parameter name.
+        inputs: as for `check_outputs`.
+        probes: names of files the command writes inside; each must pass `check_outputs`, so an
+            existing FIFO or directory of that name inside is refused too.
+
+    Raises:
+        ConfigError: ``path`` is an existing file, or a file inside it would be refused.
+    """
+    if path is None:
+        return
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ConfigError(f"`{name}` {p} is an existing file, not a directory; give a directory (or a new path)")
+    for probe in probes:
+        check_outputs({name: p / probe}, inputs)

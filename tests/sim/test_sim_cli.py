@@ -122,7 +122,7 @@ def test_bad_input_gives_one_line_errors(tmp_path, capsys):
     _fails(capsys, ["--out", out, "--frames", "2", "--config", bad], "min 0.1 is above max 0.04")
     (tmp_path / "file").write_text("x")
     _fails(capsys, ["--out", str(tmp_path / "file" / "sub"), "--frames", "2"], "choose a writable path")
-    _fails(capsys, ["--out", str(tmp_path / "file"), "--frames", "2"], "not a folder")
+    _fails(capsys, ["--out", str(tmp_path / "file"), "--frames", "2"], "not a directory")
     _fails(capsys, ["--out", out, "--frames", "2", "--config", str(tmp_path / "none.json")], "no such file")
     _fails(capsys, ["--out", out, "--frames", "2", "--workers", "0"], "--workers must be at least 1")
 
