@@ -7,7 +7,8 @@
 - `edge.io.bags`: ROS 1 .bag, ROS 2 .db3 and bag directories (``rosbags``, the ``ros`` extra) as
   the reader's MCAP records; `edge.io.compressed`: compressedDepth (16-bit PNG) decoding.
 - `edge.io.writer`: `McapWriter` (atomic, compressed) and `FrameWriter` (the depthseg layout).
-- `edge.io.atomic`: `atomic_write` and friends, for every other output file.
+- `edge.io.atomic`: `atomic_write` and friends, for every other output file; `edge.io.paths`: which
+  paths may be read and written; `edge.io.chunks`: bounded decompression of MCAP and bag chunks.
 """
 
 from edge.io.atomic import atomic_path, atomic_write, write_bytes_atomic, write_json_atomic
