@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from edge.baseline import PlaneBaseline, intrinsics_for
-from edge.errors import ConfigError, DataError, ModelError
-from edge.infer import Predictor, check_logits
+from edge.errors import ConfigError, DataError
+from edge.infer import Predictor, checked_logits
 from edge.io import Frame, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.metrics import (
@@ -271,10 +271,7 @@ def evaluate(
         if label.shape != depth.shape:
             raise DataError(f"frame at t={fr.stamp_ns} ns: label shape {label.shape} differs from depth shape {depth.shape}")
         valid = valid_mask(depth)
-        logits = np.asarray(predictor.logits(depth))
-        if logits.shape != depth.shape:
-            raise ModelError(f"{predictor.name}: returned logits of shape {logits.shape} for a {depth.shape} frame")
-        check_logits(logits, getattr(predictor, "name", "model"))
+        logits = checked_logits(predictor, depth)
         pred = predict_mask(logits, threshold)
         outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
         s = acc.add(pred, label, valid, outside_void)

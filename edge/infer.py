@@ -33,6 +33,7 @@ from edge.preprocess import preprocess_batch_for, preprocess_for, valid_mask
 
 __all__ = [
     "check_logits",
+    "checked_logits",
     "Prediction",
     "Predictor",
     "Segmenter",
@@ -112,6 +113,24 @@ def check_logits(logits: np.ndarray, name: str) -> np.ndarray:
             "the model file is broken (retrain or re-export it)"
         )
     return a
+
+
+def checked_logits(predictor: Predictor, depth: np.ndarray) -> np.ndarray:
+    """``predictor.logits(depth)`` with the checks every consumer of an arbitrary predictor needs.
+
+    eval and tune accept any `Predictor` (ONNX, checkpoint, a user's own): its logits must have the
+    frame's shape and be finite (`check_logits`), else a `ModelError` naming the predictor.
+
+    Args:
+        predictor: anything with ``logits(depth)`` and, ideally, a ``name``.
+        depth: one H x W depth frame.
+    """
+    name = str(getattr(predictor, "name", "model"))
+    logits = np.asarray(predictor.logits(depth))
+    if logits.shape != np.shape(depth):
+        raise ModelError(f"{name}: returned logits of shape {logits.shape} for a {np.shape(depth)} frame")
+    return check_logits(logits, name)
+
 
 
 def _one_line(exc: BaseException) -> str:

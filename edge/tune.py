@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError, DataError, ModelError, ThresholdError
-from edge.infer import check_logits
+from edge.infer import checked_logits
 from edge.io import Frame, atomic_write
 from edge.metrics import sigmoid, threshold_logit
 from edge.preprocess import valid_mask
@@ -545,10 +545,7 @@ def tune(
         label = np.asarray(label)
         if label.shape != depth.shape:
             raise DataError(f"frame at t={fr.stamp_ns} ns: label shape {label.shape} differs from depth shape {depth.shape}")
-        logits = np.asarray(predictor.logits(depth))
-        if logits.shape != depth.shape:
-            raise ModelError(f"{getattr(predictor, 'name', 'model')}: returned logits of shape {logits.shape} for a {depth.shape} frame")
-        check_logits(logits, str(getattr(predictor, "name", "model")))
+        logits = checked_logits(predictor, depth)
         (heldout if held(used) else tuning).add(logits, label, valid_mask(depth))
         used += 1
         if limit is not None and used >= limit:
