@@ -29,7 +29,7 @@ from edge.cliutil import progress
 from edge.errors import ConfigError, DataError, DepthsegError
 from edge.provenance import provenance
 
-__all__ = ["simulate", "shard_name", "plan_shards", "iter_shards", "check_size", "usable_cores", "MANIFEST", "MAX_FRAMES",
+__all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "MANIFEST", "MAX_FRAMES",
            "MAX_SHARDS"]
 
 TOOL = "depthseg-sim"  # recorded in the manifest
@@ -48,17 +48,15 @@ def shard_name(start: int, stop: int) -> str:
 # a dataset (a bigger one is several --out folders with different seeds).
 MAX_FRAMES = 99_999_999
 MAX_SHARDS = 100_000
-MANIFEST_EVERY_S = 10.0
-MAX_SEED = 2**128  # rewrite the manifest at most this often while shards complete
-
-
-def plan_shards(frames: int, shard_frames: int) -> list[tuple[int, int]]:
-    """[start, stop) of every shard: shard k holds frames [k*K, min((k+1)*K, N))."""
-    return list(iter_shards(frames, shard_frames))
+MANIFEST_EVERY_S = 10.0  # rewrite the manifest at most this often while shards complete
+MAX_SEED = 2**128
 
 
 def iter_shards(frames: int, shard_frames: int, start: int = 0, stop: int | None = None) -> Iterator[tuple[int, int]]:
-    """The shards of `plan_shards` lying in frames [start, stop), one at a time (nothing O(frames))."""
+    """[start, stop) of each shard lying in frames [start, stop), one at a time (nothing O(frames)).
+
+    Shard k holds frames [k*K, min((k+1)*K, N)) for ``shard_frames`` K and ``frames`` N.
+    """
     stop = frames if stop is None else stop
     for s in range(start, stop, shard_frames):
         yield s, min(s + shard_frames, frames)
