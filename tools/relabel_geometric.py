@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from edge.baseline import Intrinsics, PlaneBaseline  # noqa: E402
 from edge.cliutil import run  # noqa: E402
+from edge.errors import DataError  # noqa: E402
 from edge.io import FrameWriter, open_frames  # noqa: E402
 from edge.io.paths import check_outputs  # noqa: E402
 
@@ -51,7 +52,7 @@ def relabel(data: Path, out: Path, above_plane_m: float, limit: int | None = Non
             if limit is not None and n >= limit:
                 break
             if f.info is None or f.label is None:
-                raise SystemExit(f"{data}: frame {n} has no camera info or labels")
+                raise DataError(f"{data}: frame {n} has no camera info or labels; relabel a labelled recording with intrinsics")
             k = (f.info["fx"], f.info["fy"], f.info["cx"], f.info["cy"])
             geo = labeller.predict(f.depth, Intrinsics(*k)).astype(np.uint8)
             valid = np.isfinite(f.depth) & (f.depth > 0)
