@@ -7,7 +7,8 @@
 #    makes ~100 frames/s with 2 workers) with the pico flexx sensor model, wider domain
 #    randomisation and the scene families where a plane fit fails (tools/default_sim_config.json:
 #    noise level x0.7-3.5, 30 % white-noise frames as BlenSor's, dead-corner cone 31.5-38 deg, edges
-#    from crisp to the real sensor's (PSF 0-0.5 px), intrinsics from the datasheet to the real
+#    from crisp to the real sensor's (PSF 0-0.5 px, 3 % of flying pixels
+#    left by the filter), intrinsics from the datasheet to the real
 #    calibration, 20 % thin objects 3-8 mm, 20 % frames with a table edge, camera tilt +-15 deg),
 # 2. train a compact FCN-8s (VGG11 encoder with batch norm, width x0.125, extra pool2/pool1 skips,
 #    depth replicated to 3 channels as in the paper plus a height-above-dominant-plane channel,

@@ -127,6 +127,23 @@ def test_clean_step_has_no_flying_pixels_and_small_steps_are_not_edges():
     assert stats.flying_pixels == 0 and stats.edge_pixels == 436
 
 
+def test_edge_sharpness_is_two_for_an_ideal_step_and_zero_when_blurred():
+    d = _flat()
+    d[50:120, 100:140] = 0.25  # 70 x 40 box, 5 cm high: 216 outline pixels, 436 sharp-edge pixels
+    floor = rl.floor_mask(d, rng=np.random.default_rng(0))
+    crisp = rl.edge_sharpness(d, floor)
+    assert crisp.outline_pixels == 216 and crisp.sharpness == pytest.approx(436 / 216)
+    ramp = d.copy()  # the 50 mm step spread over three rings: every 4-neighbour step is 12.5 mm < 18 mm
+    for k, z in enumerate((0.2625, 0.275, 0.2875)):  # ring k lies k + 1 px outside the box
+        ramp[50 - 1 - k : 120 + 1 + k, 100 - 1 - k] = z
+        ramp[50 - 1 - k : 120 + 1 + k, 140 + k] = z
+        ramp[50 - 1 - k, 100 - 1 - k : 140 + 1 + k] = z
+        ramp[120 + k, 100 - 1 - k : 140 + 1 + k] = z
+    blurred = rl.edge_sharpness(ramp, rl.floor_mask(ramp, rng=np.random.default_rng(0)))
+    assert blurred.outline_pixels > 0 and blurred.sharpness == 0.0
+    assert np.isnan(rl.edge_sharpness(_flat(), np.ones((H, W), bool)).sharpness)  # no objects, no outline
+
+
 def test_realism_rejects_tiny_frames():
     with pytest.raises(DataError, match="at least 16 px"):
         rl.realism(np.ones((4, 4)))

@@ -91,7 +91,7 @@ def test_noise_grows_with_range_and_falls_with_albedo():
     assert err[50:120, 124:184].std() / err[50:120, 40:100].std() == pytest.approx(2.0, rel=0.15)
 
 
-def _step(flying_filter: bool, mixed: bool):
+def _step(flying_filter: bool, mixed: bool, miss: float = 0.0):
     """Floor at 0.30 m, an object face at 0.20 m on the right half; one mixed column between."""
     z = np.full((H, W), 0.30)
     ids = np.zeros((H, W))
@@ -104,7 +104,7 @@ def _step(flying_filter: bool, mixed: bool):
     sub_r = np.stack([r0, r0, r1, r1], 1)
     sub_ids = np.tile([0, 0, 1, 1], (H, 1))
     rr = _render(z, ids, edge=edge, sub_r=sub_r, sub_ids=sub_ids)
-    cfg = dataclasses.replace(SensorConfig.ideal(), flying_filter=flying_filter, mixed_pixels=mixed)
+    cfg = dataclasses.replace(SensorConfig.ideal(), flying_filter=flying_filter, mixed_pixels=mixed, flying_miss_prob=miss)
     return apply_sensor(rr, GRID, CAM.fx, 0.3, _draw(0.5, [0.5]), cfg, np.random.default_rng(0)), col
 
 
@@ -118,6 +118,26 @@ def test_mixed_pixels_fly_between_surfaces_and_royale_filter_removes_them():
     assert np.all(out.depth[60:110, col + 1] > 0) and np.all(out.depth[60:110, col - 1] > 0)
     out, col = _step(flying_filter=False, mixed=False)
     np.testing.assert_allclose(out.depth[60:110, col], 0.30, atol=1e-6)  # no mixing: clean edge
+
+
+def test_flying_filter_misses_the_configured_share():
+    """The real capture keeps some flying pixels: ``flying_miss_prob`` lets that share through."""
+    out, col = _step(flying_filter=True, mixed=True, miss=0.3)
+    kept = out.depth[5:-5, col] > 0
+    assert 0.15 < kept.mean() < 0.45  # 161 Bernoulli(0.3) draws
+    mid = out.depth[5:-5, col][kept]
+    assert np.all((mid > 0.205) & (mid < 0.25))  # the survivors still read in between
+    out, col = _step(flying_filter=True, mixed=True, miss=1.0)
+    assert np.all(out.depth[5:-5, col] > 0)
+
+
+def test_flying_miss_prob_zero_keeps_the_config_digest_and_is_checked():
+    from edge.errors import ConfigError
+
+    assert "flying_miss_prob" not in SensorConfig().to_dict()
+    assert SensorConfig(flying_miss_prob=0.03).to_dict()["flying_miss_prob"] == 0.03
+    with pytest.raises(ConfigError, match="flying_miss_prob"):
+        SensorConfig(flying_miss_prob=1.5)
 
 
 def test_multipath_biases_floor_near_tall_objects_only():
