@@ -302,13 +302,17 @@ class EdgeStats:
     sharpness: float  # edge pixels / outline pixels (nan when there is no outline)
 
 
-def edge_sharpness(depth: np.ndarray, floor: np.ndarray, step: float = FLYING_STEP_M) -> EdgeStats:
+def edge_sharpness(
+    depth: np.ndarray, floor: np.ndarray, step: float = FLYING_STEP_M, edge_pixels: int | None = None
+) -> EdgeStats:
     """Edge pixels (4-neighbour step > ``step``) per outline pixel of the non-floor valid pixels.
 
     Args:
         depth: Z frame in metres, 0 or non-finite = invalid.
         floor: boolean mask of the floor plane's pixels (`floor_mask`).
         step: the edge-pixel rule's depth step in metres (Royale's 18 mm).
+        edge_pixels: the frame's edge-pixel count when already known (`flying_pixels`), else
+            counted here.
     """
     d = np.asarray(depth, dtype=np.float64)
     valid = valid_mask(d)
@@ -316,7 +320,7 @@ def edge_sharpness(depth: np.ndarray, floor: np.ndarray, step: float = FLYING_ST
     p = np.pad(fl, 1, constant_values=False)
     touches_floor = p[:-2, 1:-1] | p[2:, 1:-1] | p[1:-1, :-2] | p[1:-1, 2:]
     outline = int((valid & ~fl & touches_floor).sum())
-    edges = flying_pixels(d, step)[0].edge_pixels
+    edges = flying_pixels(d, step)[0].edge_pixels if edge_pixels is None else edge_pixels
     return EdgeStats(outline, edges / outline if outline else float("nan"))
 
 
@@ -345,9 +349,10 @@ def realism(
         raise DataError(f"a depth frame must be 2-D and at least {2 * TILE} px a side, got {d.shape}")
     if floor is None:
         floor = floor_mask(d, intrinsics, np.random.default_rng(seed))
+    flying = flying_pixels(d)[0]
     return Realism(
         invalid=invalid_stats(d),
         noise=floor_noise(d, floor=floor, intrinsics=intrinsics),
-        flying=flying_pixels(d)[0],
-        edges=edge_sharpness(d, floor),
+        flying=flying,
+        edges=edge_sharpness(d, floor, edge_pixels=flying.edge_pixels),
     )

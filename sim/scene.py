@@ -46,6 +46,7 @@ __all__ = [
     "check_number",
     "check_value",
     "check_fields",
+    "omit_neutral",
     "euler_to_quat",
     "quat_to_matrix",
     "camera_rotation",
@@ -253,6 +254,25 @@ def _to_dict(obj: Any) -> dict[str, Any]:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(obj).items()}
 
 
+def omit_neutral(d: dict[str, Any], neutral: dict[str, Any], digest_only: frozenset[str] = frozenset(),
+                 for_digest: bool = False) -> dict[str, Any]:
+    """``d`` without the keys added after data were made, where they hold their neutral value.
+
+    Why: a setting added to a config must not change the digest (or the written config) of data
+    simulated before it existed, as long as it is left at the value that reproduces those frames.
+
+    Args:
+        d: a config as JSON (`_to_dict`); modified in place and returned.
+        neutral: key -> the value that means "as before the key existed" (tuples as lists).
+        digest_only: keys always written, left out only of the digest (``for_digest``).
+        for_digest: the dict feeds the config digest.
+    """
+    for k, v in neutral.items():
+        if d[k] == v and (k not in digest_only or for_digest):
+            del d[k]
+    return d
+
+
 # --------------------------------------------------------------------------- scene configuration
 
 
@@ -376,11 +396,7 @@ class SceneConfig:
         meant) is 1: it is always written, so a one-view config reads back as one view, and
         left out of the digest only at 1 (``for_digest``), so one-view data keep their digest.
         """
-        d = _to_dict(self)
-        for k, v in _FAMILY_DEFAULTS.items():
-            if d[k] == v and (k != "views_per_scene" or for_digest):
-                del d[k]
-        return d
+        return omit_neutral(_to_dict(self), _FAMILY_DEFAULTS, frozenset({"views_per_scene"}), for_digest)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> SceneConfig:

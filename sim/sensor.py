@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from sim.render import FLOOR_ID, NO_HIT, RayGrid, RenderResult
-from sim.scene import _to_dict, check_fields, check_number, check_range, config_from_dict
+from sim.scene import _to_dict, check_fields, check_number, check_range, config_from_dict, omit_neutral
 
 __all__ = ["SensorConfig", "SensorOutput", "FrameDraw", "draw_frame_params", "apply_sensor"]
 
@@ -127,10 +127,7 @@ class SensorConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """All fields; ``flying_miss_prob`` only when set, so configs from before it keep their digest."""
-        d = _to_dict(self)
-        if d["flying_miss_prob"] == 0.0:
-            del d["flying_miss_prob"]
-        return d
+        return omit_neutral(_to_dict(self), {"flying_miss_prob": 0.0})
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> SensorConfig:

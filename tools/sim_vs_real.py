@@ -107,21 +107,28 @@ def sim_frames(seed: int, n: int, height: float, config: Path | None = None):
         yield f, len(f.scene["params"]["objects"])
 
 
+def cells(real: dict[str, float], shown: dict[str, float], many: list[dict[str, float]]) -> list[tuple[str, ...]]:
+    """Per row of ROWS: label, real, shown sim frame, sim mean ± sd, sim median / real (formatted once)."""
+    out = []
+    for key, label, scale, fmt in ROWS:
+        vals = np.array([m[key] for m in many]) * scale
+        ratio = np.nanmedian(vals) / (real[key] * scale) if real[key] else float("nan")
+        out.append((
+            label.strip(),
+            fmt.format(real[key] * scale),
+            fmt.format(shown[key] * scale),
+            f"{fmt.format(np.nanmean(vals))} ± {fmt.format(np.nanstd(vals))}",
+            f"{ratio:.2f}",
+        ))  # fmt: skip
+    return out
+
+
 def table(real: dict[str, float], shown: dict[str, float], shown_index: int, many: list[dict[str, float]]) -> str:
     head = (
         f"| metric | real capture | sim frame {shown_index} | sim mean ± sd ({len(many)} frames) | sim median / real |\n"
         "|---|---:|---:|---:|---:|\n"
     )
-    lines = []
-    for key, label, scale, fmt in ROWS:
-        vals = np.array([m[key] for m in many]) * scale
-        ms = f"{fmt.format(np.nanmean(vals))} ± {fmt.format(np.nanstd(vals))}"
-        ratio = np.nanmedian(vals) / (real[key] * scale) if real[key] else float("nan")
-        lines.append(
-            f"| {label.strip()} | {fmt.format(real[key] * scale)} | {fmt.format(shown[key] * scale)} | {ms} "
-            f"| {ratio:.2f} |"
-        )
-    return head + "\n".join(lines) + "\n"
+    return head + "\n".join("| " + " | ".join(row) + " |" for row in cells(real, shown, many)) + "\n"
 
 
 def _panel(depth: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -264,17 +271,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         n_obj = len(shown_frame.scene["params"]["objects"])
         sim_title = f"sim frame {idx} (seed {args.seed}, {n_obj} objects)"
-        rows = []
-        for key, label, scale, fmt in ROWS:
-            vals = np.array([m[key] for m in many]) * scale
-            rows.append(
-                (
-                    label.strip(),
-                    fmt.format(real[key] * scale),
-                    fmt.format(shown[key] * scale),
-                    f"{fmt.format(np.nanmean(vals))} ± {fmt.format(np.nanstd(vals))}",
-                )
-            )
+        rows = [row[:4] for row in cells(real, shown, many)]
         figure(real_depth, shown_frame.depth, rows, sim_title, f"sim frame {idx}", args.png)
         md = (
             "# Simulated vs real pico flexx frame\n\n"
