@@ -28,6 +28,7 @@ from edge.cliutil import run  # noqa: E402
 from edge.errors import DataError  # noqa: E402
 from edge.io import FrameWriter, open_frames  # noqa: E402
 from edge.io.paths import check_outputs  # noqa: E402
+from edge.preprocess import valid_mask  # noqa: E402
 
 
 def relabel(data: Path, out: Path, above_plane_m: float, limit: int | None = None) -> dict[str, float]:
@@ -55,7 +56,7 @@ def relabel(data: Path, out: Path, above_plane_m: float, limit: int | None = Non
                 raise DataError(f"{data}: frame {n} has no camera info or labels; relabel a labelled recording with intrinsics")
             k = (f.info["fx"], f.info["fy"], f.info["cx"], f.info["cy"])
             geo = labeller.predict(f.depth, Intrinsics(*k)).astype(np.uint8)
-            valid = np.isfinite(f.depth) & (f.depth > 0)
+            valid = valid_mask(f.depth)
             sim = (f.label == 1) & valid
             obj += int(sim.sum())
             obj_lost += int((sim & (geo == 0)).sum())

@@ -61,6 +61,7 @@ from edge.io.chunks import (
 from edge.io.compressed import COMPRESSED_IMAGE_TYPES, decode_compressed_image, decompress_depth
 from edge.io.frames import TOPIC_CLEAN, TOPIC_SCENE, Frame, decode_scene
 from edge.io.paths import check_input_file
+from edge.preprocess import valid_mask
 
 __all__ = [
     "DepthStream",
@@ -465,7 +466,7 @@ def _valid_median(depth: np.ndarray) -> float:
     h, w = depth.shape
     stride = max(1, int(math.sqrt(h * w / 4096)))
     sub = depth[::stride, ::stride]
-    v = sub[np.isfinite(sub) & (sub > 0)]
+    v = sub[valid_mask(sub)]
     return float(np.median(v)) if v.size else math.nan
 
 
