@@ -17,6 +17,7 @@ from typing import Any
 from edge.cues import CUES
 from edge.errors import ModelError
 from edge.preprocess import STANDARDIZE_MODES
+from edge.values import show
 
 __all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics", "MAX_SENSOR_SIDE", "MAX_PAD_MULTIPLE"]
 
@@ -36,13 +37,8 @@ MAX_NESTING = 32  # depth of the free-form ``training`` record
 MAX_DISTORTION = 16  # OpenCV models have at most 14 coefficients
 
 
-def _show(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _bad(key: str, value: Any, want: str) -> ModelError:
-    return ModelError(f"model metadata '{key}' = {_show(value)}: {want}")
+    return ModelError(f"model metadata '{key}' = {show(value)}: {want}")
 
 
 def _int(key: str, value: Any, lo: int, hi: int) -> int:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from edge.errors import ConfigError
+from edge.values import is_finite, is_number, show
 from sim.shapes import PROCEDURAL_KINDS, THIN_KINDS, MeshLibrary, Shape, random_procedural, random_thin
 
 __all__ = [
@@ -131,24 +132,6 @@ def camera_rotation(yaw: float, tilt_x: float, tilt_y: float) -> np.ndarray:
 # --------------------------------------------------------------------------- configuration helpers
 
 
-def _show(value: Any, limit: int = 60) -> str:
-    """``repr(value)`` cut to one short line (a hostile config may hold a megabyte string)."""
-    r = repr(value)
-    return r if len(r) <= limit else r[: limit - 3] + "..."
-
-
-def _is_number(value: Any) -> bool:
-    """A JSON number (int or float, numpy scalars too); never a bool or a string."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
-
-
-def _finite(value: Any) -> bool:
-    try:
-        return math.isfinite(float(value))
-    except OverflowError:  # an int too large for a float
-        return False
-
-
 def check_value(name: str, value: Any, kind: Any) -> None:
     """Refuse ``value`` unless it is what the type hint ``kind`` says, as JSON spells it.
 
@@ -164,28 +147,28 @@ def check_value(name: str, value: Any, kind: Any) -> None:
     origin = typing.get_origin(kind)
     if kind is bool:
         if not isinstance(value, (bool, np.bool_)):
-            raise ConfigError(f"{name} must be true or false (a JSON boolean), got {_show(value)}")
+            raise ConfigError(f"{name} must be true or false (a JSON boolean), got {show(value)}")
     elif kind is int:
-        if not (_is_number(value) and _finite(value) and float(value) == int(value)):
-            raise ConfigError(f"{name} must be a whole number, got {_show(value)}")
+        if not (is_number(value) and is_finite(value) and float(value) == int(value)):
+            raise ConfigError(f"{name} must be a whole number, got {show(value)}")
     elif kind is float:
-        if not (_is_number(value) and _finite(value)):
-            raise ConfigError(f"{name} must be a finite number, got {_show(value)}")
+        if not (is_number(value) and is_finite(value)):
+            raise ConfigError(f"{name} must be a finite number, got {show(value)}")
     elif kind is str:
         if not isinstance(value, str):
-            raise ConfigError(f"{name} must be a string, got {_show(value)}")
+            raise ConfigError(f"{name} must be a string, got {show(value)}")
     elif origin is tuple:
         args = typing.get_args(kind)
         many = bool(args) and args[-1] is Ellipsis
         what = "strings" if args and args[0] is str else "numbers"
         want = f"a list of {what}" if many else f"a list of {len(args)} {what}"
         if not isinstance(value, (list, tuple)) or (not many and len(value) != len(args)):
-            raise ConfigError(f"{name} must be {want}, got {_show(value)}")
+            raise ConfigError(f"{name} must be {want}, got {show(value)}")
         kinds = [args[0]] * len(value) if many else list(args)
         for i, (v, k) in enumerate(zip(value, kinds)):
             check_value(f"{name}[{i}]", v, k)
     elif isinstance(kind, type) and not isinstance(value, kind):
-        raise ConfigError(f"{name} must be a {kind.__name__}, got {_show(value)}")
+        raise ConfigError(f"{name} must be a {kind.__name__}, got {show(value)}")
 
 
 @cache
@@ -202,10 +185,10 @@ def check_fields(obj: Any, section: str) -> None:
 
 def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: float | None = None) -> tuple:
     """A (min, max) pair of finite numbers with min <= max, inside optional bounds."""
-    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) for v in value)):
-        raise ConfigError(f"{name} must be a [min, max] pair of numbers, got {_show(value)}")
-    if not (_finite(value[0]) and _finite(value[1])):
-        raise ConfigError(f"{name} must be finite, got {_show(list(value))}")
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(is_number(v) for v in value)):
+        raise ConfigError(f"{name} must be a [min, max] pair of numbers, got {show(value)}")
+    if not (is_finite(value[0]) and is_finite(value[1])):
+        raise ConfigError(f"{name} must be finite, got {show(list(value))}")
     lo, hi = float(value[0]), float(value[1])
     if lo > hi:
         raise ConfigError(f"{name}: min {lo} is above max {hi}; swap them")
@@ -218,11 +201,11 @@ def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: 
 
 def check_number(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> None:
     """A finite number (not a bool, not a string) inside optional bounds."""
-    if not _is_number(value):
-        raise ConfigError(f"{name} must be a number, got {_show(value)}")
-    if not _finite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
+    if not is_number(value):
+        raise ConfigError(f"{name} must be a number, got {show(value)}")
+    if not is_finite(value) or (lo is not None and value < lo) or (hi is not None and value > hi):
         lim = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-        raise ConfigError(f"{name} = {_show(value)} is outside {lim}")
+        raise ConfigError(f"{name} = {show(value)} is outside {lim}")
 
 
 def _short_keys(keys: list[str]) -> list[str]:
