@@ -17,7 +17,7 @@ from typing import Any
 from edge.cues import CUES
 from edge.errors import ModelError
 from edge.preprocess import STANDARDIZE_MODES
-from edge.values import show
+from edge.values import is_finite, show
 
 __all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics", "MAX_SENSOR_SIDE", "MAX_PAD_MULTIPLE"]
 
@@ -55,7 +55,7 @@ def _float(key: str, value: Any, lo: float, hi: float, open_lo: bool = False, op
     """``value`` as a finite float in the interval (strings, bools, NaN and infinities refused)."""
     a, b = "(" if open_lo else "[", ")" if open_hi else "]"
     want = f"must be a finite number in {a}{lo:g}, {hi:g}{b}"
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not is_finite(value):
         raise _bad(key, value, want)
     v = float(value)
     if not math.isfinite(v) or v < lo or v > hi or (open_lo and v == lo) or (open_hi and v == hi):
