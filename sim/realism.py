@@ -40,13 +40,15 @@ with a floor pixel among their 4 neighbours; ``sharpness`` = edge pixels / outli
 blurred edge spreads each step over several pixels below the 18 mm rule and drives it towards 0;
 an ideal step gives 2 (the pixels on both sides of it are edge pixels); a filter that removes the
 mixed pixel between the two sides lowers it (the removed pixel's neighbours no longer compare).
+``invalid_per_edge_pixel`` = invalid pixels of the *edge* region above per valid edge pixel: how
+much the flying-pixel filter and mixed returns remove per pixel of edge.
 
 Numpy only (no torch, no scipy): runs on the edge path and in tests.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -296,10 +298,13 @@ def flying_pixels(depth: np.ndarray, step: float = FLYING_STEP_M) -> tuple[Flyin
 
 @dataclass(frozen=True)
 class EdgeStats:
-    """Sharp-edge pixels per pixel of object outline (scene-independent, unlike the count)."""
+    """Edge statistics that do not grow with the scene's amount of edge (unlike the counts)."""
 
     outline_pixels: int
     sharpness: float  # edge pixels / outline pixels (nan when there is no outline)
+    # invalid pixels in the object-edge region per valid edge pixel: how many pixels the flying-pixel
+    # filter and mixed returns remove per pixel of edge (nan without edge pixels)
+    invalid_per_edge_pixel: float = float("nan")
 
 
 def edge_sharpness(
@@ -350,9 +355,13 @@ def realism(
     if floor is None:
         floor = floor_mask(d, intrinsics, np.random.default_rng(seed))
     flying = flying_pixels(d)[0]
+    inv = invalid_stats(d)
+    edges = edge_sharpness(d, floor, edge_pixels=flying.edge_pixels)
+    edge_invalid = inv.edge_share * inv.fraction * d.size
+    per_edge = edge_invalid / flying.edge_pixels if flying.edge_pixels else float("nan")
     return Realism(
-        invalid=invalid_stats(d),
+        invalid=inv,
         noise=floor_noise(d, floor=floor, intrinsics=intrinsics),
         flying=flying,
-        edges=edge_sharpness(d, floor, edge_pixels=flying.edge_pixels),
+        edges=replace(edges, invalid_per_edge_pixel=per_edge),
     )

@@ -51,7 +51,7 @@ ROWS = [
     ("invalid.corner_share", "  of which in the corners, %", 100, "{:.0f}"),
     ("invalid.edge_share", "  of which at object edges, %", 100, "{:.0f}"),
     ("invalid.other_share", "  of which elsewhere, %", 100, "{:.0f}"),
-    ("invalid.edge_per_edge_pixel", "invalid edge pixels per valid edge pixel", 1, "{:.3f}"),
+    ("edges.invalid_per_edge_pixel", "invalid edge pixels per valid edge pixel", 1, "{:.3f}"),
     *[(f"invalid.corner_fill.{c}", f"corner {c}: % of its region invalid", 100, "{:.1f}") for c in CORNERS],
     ("noise.sigma_patch", "floor noise sigma (8x8 plane fits), mm", 1000, "{:.2f}"),
     ("noise.sigma_diff", "floor noise sigma (neighbour diff.), mm", 1000, "{:.2f}"),
@@ -63,7 +63,7 @@ ROWS = [
 ]
 
 
-def _flat(r: Realism, pixels: int) -> dict[str, float]:
+def _flat(r: Realism) -> dict[str, float]:
     d = r.to_dict()
     out: dict[str, float] = {}
 
@@ -78,9 +78,6 @@ def _flat(r: Realism, pixels: int) -> dict[str, float]:
     walk("", d)
     sp, sd = out["noise.sigma_patch"], out["noise.sigma_diff"]
     out["noise.correlation_ratio"] = sd / sp if sp > 0 else float("nan")
-    # scene-independent: how many pixels the edge filter / mixing removes per metre of edge
-    edge_invalid = r.invalid.edge_share * r.invalid.fraction * pixels
-    out["invalid.edge_per_edge_pixel"] = edge_invalid / r.flying.edge_pixels if r.flying.edge_pixels else float("nan")
     return out
 
 
@@ -254,10 +251,10 @@ def main(argv: list[str] | None = None) -> int:
             if p.is_dir() or not p.parent.exists():
                 raise ConfigError(f"{p}: not a file path in an existing directory")
         real_depth, real_k = real_frame(args.real)
-        real = _flat(realism(real_depth, real_k), real_depth.size)
+        real = _flat(realism(real_depth, real_k))
         many, shown, shown_frame = [], None, None
         for f, n_obj in sim_frames(args.seed, args.frames, args.height, args.config):
-            m = _flat(realism(f.depth, f.intrinsics, seed=f.index), f.depth.size)
+            m = _flat(realism(f.depth, f.intrinsics, seed=f.index))
             many.append(m)
             if shown is None and args.objects[0] <= n_obj <= args.objects[1]:
                 shown, shown_frame = m, f

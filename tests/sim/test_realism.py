@@ -144,6 +144,15 @@ def test_edge_sharpness_is_two_for_an_ideal_step_and_zero_when_blurred():
     assert np.isnan(rl.edge_sharpness(_flat(), np.ones((H, W), bool)).sharpness)  # no objects, no outline
 
 
+def test_invalid_edge_pixels_per_valid_edge_pixel():
+    d = _flat()
+    d[60:110, 80:150] = 0.25  # a 5 cm box
+    d[60:110, 79] = 0.0  # the flying-pixel filter removed the column left of it: 50 px
+    r = rl.realism(d)
+    assert r.edges.invalid_per_edge_pixel == pytest.approx(50 / rl.flying_pixels(d)[0].edge_pixels)
+    assert np.isnan(rl.realism(_flat()).edges.invalid_per_edge_pixel)  # no edges
+
+
 def test_realism_rejects_tiny_frames():
     with pytest.raises(DataError, match="at least 16 px"):
         rl.realism(np.ones((4, 4)))
