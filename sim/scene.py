@@ -35,7 +35,16 @@ import numpy as np
 
 from edge.errors import ConfigError
 from edge.values import is_finite, is_number, show
-from sim.shapes import PROCEDURAL_KINDS, THIN_KINDS, MeshLibrary, Shape, random_procedural, random_thin
+from sim.shapes import (
+    LONG_KINDS,
+    PROCEDURAL_KINDS,
+    THIN_KINDS,
+    MeshLibrary,
+    Shape,
+    random_long,
+    random_procedural,
+    random_thin,
+)
 
 __all__ = [
     "SceneConfig",
@@ -285,6 +294,10 @@ class SceneConfig:
     thin_fraction: float = 0.0  # share of objects drawn flat (coins, plates, rings, flat tools)
     thin_thickness_m: tuple[float, float] = (0.003, 0.008)  # their thickness; ignores min_thickness_m
     thin_shapes: tuple[str, ...] = THIN_KINDS
+    long_fraction: float = 0.0  # share of the other objects drawn long and narrow (handles, rods, sticks) ...
+    long_length_m: tuple[float, float] = (0.12, 0.30)  # ... this long, beyond largest_dim_m ...
+    long_diameter_m: tuple[float, float] = (0.01, 0.04)  # ... this thick, released lying, last
+    long_shapes: tuple[str, ...] = LONG_KINDS
     table_edge_prob: float = 0.0  # per frame: the table ends in a straight edge ...
     table_edge_dist_m: tuple[float, float] = (0.09, 0.2)  # ... this far from the scene centre ...
     floor_drop_m: tuple[float, float] = (0.25, 0.8)  # ... with the room floor this far below
@@ -357,6 +370,12 @@ class SceneConfig:
         bad = [s for s in self.thin_shapes if s not in THIN_KINDS]
         if not self.thin_shapes or bad:
             raise ConfigError(f"scene.thin_shapes: unknown {bad or 'empty list'}; choose from {list(THIN_KINDS)}")
+        check_number("scene.long_fraction", self.long_fraction, 0.0, 1.0)
+        check_range("scene.long_length_m", self.long_length_m, 0.005, 2.0)
+        check_range("scene.long_diameter_m", self.long_diameter_m, 0.001, 0.5)
+        bad = [s for s in self.long_shapes if s not in LONG_KINDS]
+        if not self.long_shapes or bad:
+            raise ConfigError(f"scene.long_shapes: unknown {bad or 'empty list'}; choose from {list(LONG_KINDS)}")
         check_number("scene.table_edge_prob", self.table_edge_prob, 0.0, 1.0)
         check_range("scene.table_edge_dist_m", self.table_edge_dist_m, 0.0, 10.0)
         check_range("scene.floor_drop_m", self.floor_drop_m, 0.01, 10.0)
@@ -392,6 +411,10 @@ _FAMILY_DEFAULTS = {
         "thin_fraction": 0.0,
         "thin_thickness_m": (0.003, 0.008),
         "thin_shapes": THIN_KINDS,
+        "long_fraction": 0.0,
+        "long_length_m": (0.12, 0.30),
+        "long_diameter_m": (0.01, 0.04),
+        "long_shapes": LONG_KINDS,
         "table_edge_prob": 0.0,
         "table_edge_dist_m": (0.09, 0.2),
         "floor_drop_m": (0.25, 0.8),
@@ -605,21 +628,31 @@ def _u(rng: np.random.Generator, r: tuple[float, float]) -> float:
 
 
 _THIN_TILT_RAD = 0.25  # thin objects are released nearly flat so they settle flat
+_LONG_TILT_RAD = 0.3  # long objects are released within this of lying down, at any yaw
 
 
-def _thin_object(rng: np.random.Generator, cfg: SceneConfig, k: int) -> ObjectSpec:
-    """A flat object released nearly level in slot k (thin objects take the lowest slots)."""
-    shape = random_thin(rng, _u(rng, cfg.largest_dim_m), _u(rng, cfg.thin_thickness_m), cfg.thin_shapes)
-    euler = (
-        float(rng.uniform(-_THIN_TILT_RAD, _THIN_TILT_RAD)),
-        float(rng.uniform(-_THIN_TILT_RAD, _THIN_TILT_RAD)),
-        float(rng.uniform(-_PI, _PI)),
-    )
+def _release(rng: np.random.Generator, cfg: SceneConfig, shape: Shape, euler: tuple[float, float, float], k: int) -> ObjectSpec:
+    """Object k released with its lowest point drop_clearance above slot k * drop_step (Table I)."""
     q = euler_to_quat(*euler)
     lowest = float((shape.vertices.astype(np.float64) @ quat_to_matrix(q)[2]).min())
     z = k * cfg.drop_step_m + cfg.drop_clearance_m - lowest
     pos = np.array([_u(rng, cfg.object_xy_m), _u(rng, cfg.object_xy_m), z])
     return ObjectSpec(shape, pos, q, _u(rng, cfg.density_kg_m3), euler)
+
+
+def _thin_object(rng: np.random.Generator, cfg: SceneConfig, k: int) -> ObjectSpec:
+    """A flat object released nearly level in slot k (thin objects take the lowest slots)."""
+    shape = random_thin(rng, _u(rng, cfg.largest_dim_m), _u(rng, cfg.thin_thickness_m), cfg.thin_shapes)
+    tilt = rng.uniform(-_THIN_TILT_RAD, _THIN_TILT_RAD, size=2)
+    return _release(rng, cfg, shape, (float(tilt[0]), float(tilt[1]), float(rng.uniform(-_PI, _PI))), k)
+
+
+def _long_object(rng: np.random.Generator, cfg: SceneConfig, k: int) -> ObjectSpec:
+    """A long narrow object released lying in slot k (long objects take the highest slots, so
+    they fall onto the others and often lean across them, like a brush on a cluttered table)."""
+    shape = random_long(rng, _u(rng, cfg.long_length_m), _u(rng, cfg.long_diameter_m), cfg.long_shapes)
+    tilt = rng.uniform(-_LONG_TILT_RAD, _LONG_TILT_RAD, size=2)
+    return _release(rng, cfg, shape, (float(_PI / 2 + tilt[0]), float(tilt[1]), float(rng.uniform(-_PI, _PI))), k)
 
 
 def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrary | None = None) -> SceneSpec:
@@ -630,10 +663,14 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
     """
     n = int(rng.integers(int(cfg.n_objects[0]), int(cfg.n_objects[1]) + 1))
     n_thin = int(rng.binomial(n, cfg.thin_fraction)) if cfg.thin_fraction > 0 else 0
+    n_long = int(rng.binomial(n - n_thin, cfg.long_fraction)) if cfg.long_fraction > 0 else 0
     objects: list[ObjectSpec] = []
     for k in range(n):
         if k < n_thin:
             objects.append(_thin_object(rng, cfg, k))
+            continue
+        if k >= n - n_long:
+            objects.append(_long_object(rng, cfg, k))
             continue
         largest = _u(rng, cfg.largest_dim_m)
         if library is not None and len(library) and rng.random() < cfg.library_fraction:
@@ -641,11 +678,7 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
         else:
             shape = random_procedural(rng, largest, cfg.min_thickness_m, cfg.shapes, cfg.shape_weights)
         euler = (_u(rng, cfg.euler_rad), _u(rng, cfg.euler_rad), _u(rng, cfg.euler_rad))
-        q = euler_to_quat(*euler)
-        lowest = float((shape.vertices.astype(np.float64) @ quat_to_matrix(q)[2]).min())
-        z = k * cfg.drop_step_m + cfg.drop_clearance_m - lowest
-        pos = np.array([_u(rng, cfg.object_xy_m), _u(rng, cfg.object_xy_m), z])
-        objects.append(ObjectSpec(shape, pos, q, _u(rng, cfg.density_kg_m3), euler))
+        objects.append(_release(rng, cfg, shape, euler, k))
     camera = {
         "camera_height": _u(rng, cfg.camera_height_m),
         "camera_xy": (float(cfg.camera_xy_m[0]), float(cfg.camera_xy_m[1])),

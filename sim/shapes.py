@@ -42,6 +42,9 @@ __all__ = [
     "random_procedural",
     "make_thin_shape",
     "random_thin",
+    "LONG_KINDS",
+    "make_long_shape",
+    "random_long",
     "box_mesh",
     "fit_mesh",
     "MeshLibrary",
@@ -64,6 +67,11 @@ MESH_SUFFIXES = (".obj", ".stl", ".off", ".ply")
 # Thin objects (scene.thin_fraction): flat things a floor-plane fit swallows. They ignore the
 # minimum thickness on purpose; their thickness comes from scene.thin_thickness_m.
 THIN_KINDS = ("disc", "plate", "ring", "bar", "lshape")
+# Long objects (scene.long_fraction): handles, pens, rods and sticks 12-30 cm long and 1-4 cm
+# across, beyond Table I's 10 cm. A real capture showed why: a brush handle lying across other
+# objects, 1-3 cm above the table, was missed by a model that had never seen anything so long
+# and narrow (it looks like a tray rim, which is background).
+LONG_KINDS = ("rod", "handle", "stick")
 
 # Render mesh resolution: enough for 1-2 px accuracy at 20 cm, small enough for a fast BVH.
 _SEG = 24  # segments around an axis of revolution
@@ -289,11 +297,23 @@ def _box(rng, largest, thin):
     return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
 
 
+def _cylinder_mesh(r: float, h: float):
+    """Closed cylinder of radius r and half height h along body z, with its native collider."""
+    v, t = _revolve([(0, -h), (r, -h), (r, h), (0, h)])
+    return v, t, (Part("cylinder", (r, h)),)
+
+
+def _capsule_mesh(r: float, h: float):
+    """Capsule of radius r whose straight part has half length h along body z."""
+    prof = _arc(0, -h, r, -np.pi / 2, 0, _RINGS // 2 + 1) + _arc(0, h, r, 0, np.pi / 2, _RINGS // 2 + 1)
+    v, t = _revolve(prof)
+    return v, t, (Part("capsule", (r, h)),)
+
+
 def _cylinder(rng, largest, thin):
     diam, height = _dims(rng, largest, thin, 2)
-    r, h = diam / 2, height / 2
-    v, t = _revolve([(0, -h), (r, -h), (r, h), (0, h)])
-    return v, t, (Part("cylinder", (r, h)),), {"diameter_m": round(diam, 5), "height_m": round(height, 5)}
+    v, t, parts = _cylinder_mesh(diam / 2, height / 2)
+    return v, t, parts, {"diameter_m": round(diam, 5), "height_m": round(height, 5)}
 
 
 def _sphere(rng, largest, thin):
@@ -304,11 +324,8 @@ def _sphere(rng, largest, thin):
 
 def _capsule(rng, largest, thin):
     diam = rng.uniform(min(thin, largest), largest * 0.8)
-    r = diam / 2
-    h = max(largest / 2 - r, 1e-4)
-    prof = _arc(0, -h, r, -np.pi / 2, 0, _RINGS // 2 + 1) + _arc(0, h, r, 0, np.pi / 2, _RINGS // 2 + 1)
-    v, t = _revolve(prof)
-    return v, t, (Part("capsule", (r, h)),), {"diameter_m": round(diam, 5), "length_m": round(largest, 5)}
+    v, t, parts = _capsule_mesh(diam / 2, max(largest / 2 - diam / 2, 1e-4))
+    return v, t, parts, {"diameter_m": round(diam, 5), "length_m": round(largest, 5)}
 
 
 def _cone(rng, largest, thin):
@@ -535,6 +552,39 @@ def make_thin_shape(kind: str, rng: np.random.Generator, largest: float, thickne
 
 def random_thin(rng: np.random.Generator, largest: float, thickness: float, kinds: Sequence[str]) -> Shape:
     return make_thin_shape(str(kinds[int(rng.integers(len(kinds)))]), rng, largest, thickness)
+
+
+# --------------------------------------------------------------------------- long shapes
+
+
+def _rod(rng, length, diam):
+    """A pen / pipe / round handle: a cylinder along body z."""
+    return (*_cylinder_mesh(diam / 2, length / 2), {})
+
+
+def _handle(rng, length, diam):
+    """A rounded handle / tube of paste: a capsule along body z."""
+    return (*_capsule_mesh(diam / 2, max(length / 2 - diam / 2, 1e-4)), {})
+
+
+def _stick(rng, length, diam):
+    """A wooden spoon's handle / a square rod: a box along body z, its cross-section not square."""
+    d = np.array([diam, diam * rng.uniform(0.5, 1.5), length])
+    v, t = _box_mesh(d / 2)
+    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+
+
+_LONG_GENERATORS: dict[str, Callable] = {"rod": _rod, "handle": _handle, "stick": _stick}
+
+
+def make_long_shape(kind: str, rng: np.random.Generator, length: float, diameter: float) -> Shape:
+    """A long narrow shape of ``kind``: ``length`` along body z, about ``diameter`` across."""
+    info = {"length_m": round(float(length), 5), "diameter_m": round(float(diameter), 5), "long": True}
+    return _generate(_LONG_GENERATORS, "long shape", kind, rng, length, diameter, info)
+
+
+def random_long(rng: np.random.Generator, length: float, diameter: float, kinds: Sequence[str]) -> Shape:
+    return make_long_shape(str(kinds[int(rng.integers(len(kinds)))]), rng, length, diameter)
 
 
 # --------------------------------------------------------------------------- mesh library

@@ -41,7 +41,7 @@ DATASETS: list[tuple[str, str, list[str]]] = [
     ("blurred-edge sim (PSF 0.7-1.1 px, the old fit)", "data/test_blurred", _sim("data/test_blurred", 300, 4, BLURRED)),
     *[
         (f"family: {f.replace('_', ' ')}", f"data/test_{f}", _sim(f"data/test_{f}", 300, 2, FAMILIES / f"{f}.json"))
-        for f in ("thin", "table_edge", "tilted", "curved", "tray", "stacked")
+        for f in ("thin", "table_edge", "tilted", "curved", "tray", "stacked", "long")
     ],
     (
         "own sim, labelled by the real capture's rule (> 10 mm above the floor plane)",

@@ -1,5 +1,5 @@
 """Scene families where a floor-plane fit fails: thin objects, table edges, curved supports,
-trays. Each is off by default (default frames unchanged) and validated like the other keys."""
+trays; and long objects (handles, rods) that Table I never had. Each is off by default (default frames unchanged) and validated like the other keys."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from edge.errors import ConfigError
 from sim.generate import SimConfig, generate_frame
 from sim.render import ray_grid
 from sim.scene import SceneConfig, camera_rotation, quat_to_matrix, sample_scene
-from sim.shapes import THIN_KINDS, make_thin_shape
+from sim.shapes import LONG_KINDS, THIN_KINDS, make_long_shape, make_thin_shape
 
 FAMILIES = Path(__file__).resolve().parents[2] / "tools" / "scene_families"
 
@@ -45,6 +45,10 @@ def test_family_keys_are_off_by_default_and_keep_the_digest():
         ("thin_thickness_m", [0.008, 0.003], "above max"),
         ("thin_thickness_m", [0.003, 0.2], "scene.thin_thickness_m"),
         ("thin_shapes", ["disc", "spoon"], "scene.thin_shapes"),
+        ("long_fraction", -0.2, "scene.long_fraction"),
+        ("long_length_m", [0.3, 0.1], "above max"),
+        ("long_diameter_m", [0.0, 0.02], "scene.long_diameter_m: min 0.0 is below"),
+        ("long_shapes", ["rod", "broom"], "scene.long_shapes"),
         ("support_curvature", [-3.0, 0.5], "scene.support_curvature: min -3.0 is below"),
         ("table_edge_prob", -0.1, "scene.table_edge_prob"),
         ("floor_drop_m", [0.5, 0.2], "above max"),
@@ -72,6 +76,40 @@ def test_thin_objects_take_the_lowest_slots():
     thin = [o.shape.params.get("thin", False) for o in scene.objects]
     n = sum(thin)
     assert 0 < n < 10 and thin == [True] * n + [False] * (10 - n)
+
+
+def test_long_family_is_off_by_default_and_keeps_the_digest():
+    assert "long_fraction" not in SceneConfig().to_dict()
+    assert SimConfig.from_dict({"scene": {"long_fraction": 0.0}}).digest() == SimConfig().digest()
+    assert SimConfig.from_dict({"scene": {"long_fraction": 0.1}}).digest() != SimConfig().digest()
+
+
+@pytest.mark.parametrize("kind", LONG_KINDS)
+def test_long_shapes_have_the_requested_length_and_girth(kind):
+    s = make_long_shape(kind, np.random.default_rng(1), 0.25, 0.02)
+    assert s.extents[2] == pytest.approx(0.25, rel=0.03)  # along body z
+    assert 0.009 < s.extents[:2].min() <= s.extents[:2].max() < 0.032
+    assert s.params["long"] and s.parts
+
+
+def test_long_objects_take_the_highest_slots_and_fall_last():
+    cfg = SceneConfig(n_objects=(10, 10), long_fraction=0.5)
+    scene = sample_scene(np.random.default_rng(4), cfg)
+    long_ = [o.shape.params.get("long", False) for o in scene.objects]
+    n = sum(long_)
+    assert 0 < n < 10 and long_ == [False] * (10 - n) + [True] * n
+    for o in scene.objects[10 - n:]:  # released lying: the long axis within 0.3 rad of level
+        assert abs(quat_to_matrix(o.quat)[2, 2]) < np.sin(0.3) + 1e-9
+
+
+def test_long_objects_settle_and_are_labelled_past_table_i_size():
+    cfg = SimConfig.from_dict({"scene": {"n_objects": [3, 3], "long_fraction": 1.0, "long_length_m": [0.2, 0.2]}})
+    f = generate_frame(0, 3, cfg)
+    objs = f.scene["params"]["objects"]
+    assert all(o["long"] for o in objs)
+    assert all(o["rest_pos_m"][2] < 0.2 for o in objs)  # they came to rest, none left in the air
+    world = _world(f, cfg)[f.label == 1]
+    assert np.ptp(world[:, 0]) > 0.12 or np.ptp(world[:, 1]) > 0.12  # longer than Table I's 10 cm
 
 
 def test_thin_objects_rest_flat_and_are_labelled():
