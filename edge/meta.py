@@ -170,6 +170,7 @@ class ModelMeta:
     in_channels: int = 3
     batch_norm: bool = False
     extra_skip: bool = False
+    full_skip: bool = False  # the full-resolution conv1 map fused before the classifier (edge.train.model)
     pad_multiple: int = 32
     standardize: str = "valid-pixels"
     cues: tuple[str, ...] = ()  # extra input channels after the depth copies (edge.cues.CUES)
@@ -194,6 +195,7 @@ class ModelMeta:
         put(self, "in_channels", in_ch)
         put(self, "batch_norm", _bool("batch_norm", self.batch_norm))
         put(self, "extra_skip", _bool("extra_skip", self.extra_skip))
+        put(self, "full_skip", _bool("full_skip", self.full_skip))
         put(self, "pad_multiple", _int("pad_multiple", self.pad_multiple, 1, MAX_PAD_MULTIPLE))
         put(self, "standardize", _str("standardize", self.standardize, tuple(STANDARDIZE_MODES)))
         cues = self.cues
@@ -225,6 +227,8 @@ class ModelMeta:
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
+        if not self.full_skip:  # added later: models without it keep their metadata byte for byte
+            del d["full_skip"]
         d["sensor"]["distortion"] = list(self.sensor.distortion)
         d["cues"] = list(self.cues)
         return d

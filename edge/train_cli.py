@@ -57,6 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--cues", default="", help="extra input channels, comma-separated: 'height' = cm above the "
                    "dominant plane (edge.cues); default none")
     m.add_argument("--extra-skip", action="store_true", help="also fuse pool2 and pool1 (paper V.d)")
+    m.add_argument("--full-skip", action="store_true",
+                   help="also fuse the full-resolution conv1 map before the classifier (sharper object boundaries)")
     m.add_argument("--encoder-weights", help="local torchvision VGG state_dict file (ImageNet weights); default: from scratch")
     m.add_argument("--freeze-encoder", action="store_true", help="train only the decoder (the paper's setting with pretrained weights)")
     t = p.add_argument_group("training")
@@ -135,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         if bad:
             raise ConfigError(f"--cues: unknown {bad}; choose from {list(CUES)}")
         meta = ModelMeta(encoder=args.encoder, width=args.width, in_channels=args.in_channels,
-                         batch_norm=args.batch_norm, extra_skip=args.extra_skip, standardize=args.standardize,
+                         batch_norm=args.batch_norm, extra_skip=args.extra_skip, full_skip=args.full_skip,
+                         standardize=args.standardize,
                          cues=cues)
         topics = {"depth_topic": args.depth_topic, "labels_topic": args.labels_topic}
         from edge.train.distributed import is_main_process

@@ -3,8 +3,9 @@
 The encoder contract (every registered encoder honours it, tests check it):
 - ``encoder.features`` is an ``nn.Sequential`` laid out exactly like torchvision's
   ``vgg*.features`` (same indices), so a torchvision VGG ``state_dict`` loads into it;
-- ``encoder(x)`` returns ``{"pool1": ..., "pool5": ...}``, the outputs of the five max-pools,
-  at strides 2, 4, 8, 16, 32 of the input (highest resolution first);
+- ``encoder(x)`` returns ``{"conv1": ..., "pool1": ..., "pool5": ...}``: the last activation of
+  the first conv block at full resolution (stride 1, the input of pool1), then the outputs of
+  the five max-pools at strides 2, 4, 8, 16, 32 of the input (highest resolution first);
 - ``encoder.out_channels`` maps each of those names to its channel count;
 - input H and W must be multiples of 32 (the preprocessing pads to that).
 
@@ -60,7 +61,7 @@ class VGGEncoder(nn.Module):
                 layers.append(nn.ReLU(inplace=True))
                 c = out
         self.features = nn.Sequential(*layers)
-        self.out_channels = {f"pool{i + 1}": ch for i, ch in enumerate(pool_channels)}
+        self.out_channels = {"conv1": pool_channels[0]} | {f"pool{i + 1}": ch for i, ch in enumerate(pool_channels)}
 
     @property
     def first_conv(self) -> nn.Conv2d:
@@ -70,6 +71,8 @@ class VGGEncoder(nn.Module):
         out: dict[str, torch.Tensor] = {}
         k = 1
         for i, layer in enumerate(self.features):
+            if i == self._pool_idx[0]:
+                out["conv1"] = x  # pooling is not in place, so this stays the full-resolution map
             x = layer(x)
             if i in self._pool_idx:
                 out[f"pool{k}"] = x

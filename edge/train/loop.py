@@ -179,7 +179,7 @@ def train(
             raise ModelError(f"{last}: nothing to resume; start without `resume`")
         blob = read_checkpoint(last)
         saved = checkpoint_meta(last, blob)
-        for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip", "standardize", "cues"):
+        for k in ("encoder", "width", "in_channels", "batch_norm", "extra_skip", "full_skip", "standardize", "cues"):
             if getattr(saved, k) != getattr(meta, k):
                 raise ConfigError(
                     f"`resume`: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"

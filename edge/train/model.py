@@ -5,6 +5,10 @@ ReLU then BatchNorm, channels 512-512-256-128-64-32 (times the width); pool4 is 
 first deconvolution and pool3 after the second (FCN-8s); a 1x1 conv gives one logit channel.
 No sigmoid: the loss is BCEWithLogits and prediction applies the sigmoid (paper III.C, III.E).
 ``extra_skip`` adds pool2 after the third and pool1 after the fourth deconvolution (paper V.d).
+``full_skip`` adds the encoder's full-resolution ``conv1`` map, through a 1x1 projection, after
+the last deconvolution. Why: every other path to the classifier passes a stride-2 or coarser
+map, so an object boundary can only be placed to about a pixel, and outside the simulator the
+model paints a 1-2 px halo around objects (issue 9); this path carries the exact edge.
 """
 
 from __future__ import annotations
@@ -20,10 +24,11 @@ __all__ = ["FCN8s", "build_model", "count_parameters", "load_vgg_weights", "free
 
 
 class FCN8s(nn.Module):
-    def __init__(self, encoder: nn.Module, width: float = 1.0, extra_skip: bool = False) -> None:
+    def __init__(self, encoder: nn.Module, width: float = 1.0, extra_skip: bool = False, full_skip: bool = False) -> None:
         super().__init__()
         self.encoder = encoder
         self.extra_skip = extra_skip
+        self.full_skip = full_skip
         ch = encoder.out_channels
         c5 = ch["pool5"]
         dec = [scaled(c, width) for c in (512, 256, 128, 64, 32)]
@@ -36,6 +41,8 @@ class FCN8s(nn.Module):
         self.relu = nn.ReLU(inplace=True)
         self.bns = nn.ModuleList(nn.BatchNorm2d(o) for o in dec)
         self.classifier = nn.Conv2d(dec[-1], 1, kernel_size=1)
+        if full_skip:
+            self.full_proj = nn.Conv2d(ch["conv1"], dec[-1], kernel_size=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h, w = x.shape[-2:]
@@ -51,6 +58,8 @@ class FCN8s(nn.Module):
             s = bn(self.relu(deconv(s)))
             if i in skips:
                 s = s + f[skips[i]]
+        if self.full_skip:
+            s = s + self.full_proj(f["conv1"])
         return self.classifier(s)
 
 
@@ -62,7 +71,7 @@ def build_model(meta: ModelMeta) -> FCN8s:
     """The network a ``ModelMeta`` describes (weights freshly initialised: Kaiming, PyTorch default)."""
     name = meta.encoder + ("_bn" if meta.batch_norm and not meta.encoder.endswith("_bn") else "")
     enc = create_encoder(name, in_channels=meta.net_channels, width=meta.width)
-    return FCN8s(enc, width=meta.width, extra_skip=meta.extra_skip)
+    return FCN8s(enc, width=meta.width, extra_skip=meta.extra_skip, full_skip=meta.full_skip)
 
 
 def freeze_encoder(model: FCN8s) -> None:

@@ -13,7 +13,7 @@ from edge.train.encoders import VGG_CFGS, VGGEncoder, create_encoder, list_encod
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
 TINY_WIDTH = 0.0625
-STRIDES = {"pool1": 2, "pool2": 4, "pool3": 8, "pool4": 16, "pool5": 32}
+STRIDES = {"conv1": 1, "pool1": 2, "pool2": 4, "pool3": 8, "pool4": 16, "pool5": 32}
 
 
 def tiny(encoder: str = "vgg11", **kw) -> FCN8s:
@@ -66,13 +66,35 @@ def test_non_multiple_of_32_raises_naming_the_padded_size(size):
         model(torch.zeros(1, 1, *size))
 
 
+def test_full_skip_adds_one_projection_and_reaches_the_output():
+    a, b = tiny("vgg11", extra_skip=True), tiny("vgg11", extra_skip=True, full_skip=True)
+    c1, dec = a.encoder.out_channels["conv1"], a.classifier.in_channels
+    assert count_parameters(b) - count_parameters(a) == c1 * dec + dec  # a 1x1 conv with bias
+    b.load_state_dict(a.state_dict(), strict=False)
+    x = torch.randn(1, 3, 64, 64)
+    with torch.inference_mode():
+        assert b(x).shape == (1, 1, 64, 64)
+        assert not torch.allclose(a(x), b(x))
+        b.full_proj.weight.zero_()
+        b.full_proj.bias.zero_()
+        assert torch.allclose(a(x), b(x))  # with the projection at zero it is the plain model
+
+
+def test_full_skip_metadata_is_left_out_when_off():
+    assert "full_skip" not in ModelMeta().to_dict()  # older models keep their metadata byte for byte
+    m = ModelMeta(encoder="vgg11", full_skip=True)
+    assert ModelMeta.from_json(m.to_json()).full_skip is True
+    with pytest.raises(ModelError, match="full_skip"):
+        ModelMeta(full_skip="yes")
+
+
 @pytest.mark.parametrize("name", list_encoders())
 def test_encoder_contract(name):
     enc = create_encoder(name, in_channels=1, width=0.125)
     assert isinstance(enc.features, torch.nn.Sequential)
     with torch.inference_mode():
         out = enc(torch.randn(1, 1, 64, 96))
-    assert list(out) == ["pool1", "pool2", "pool3", "pool4", "pool5"]  # highest resolution first
+    assert list(out) == ["conv1", "pool1", "pool2", "pool3", "pool4", "pool5"]  # highest resolution first
     assert set(enc.out_channels) == set(out)
     for key, t in out.items():
         s = STRIDES[key]
@@ -82,7 +104,7 @@ def test_encoder_contract(name):
 
 def test_full_width_channels_follow_torchvision():
     enc = create_encoder("vgg16", in_channels=3, width=1.0)
-    assert enc.out_channels == {"pool1": 64, "pool2": 128, "pool3": 256, "pool4": 512, "pool5": 512}
+    assert enc.out_channels == {"conv1": 64, "pool1": 64, "pool2": 128, "pool3": 256, "pool4": 512, "pool5": 512}
     assert len(enc.features) == 31  # VGG16 `features`: the paper's first 31 layers
 
 

@@ -7,11 +7,12 @@ import onnx
 import pytest
 import torch
 from exportgen import blensor_frames, dead_pixel_frames, tiny_model
+from tinymodel import one_torch_thread
 
 from edge.errors import ModelError
 from edge.infer import Segmenter
 from edge.meta import ModelMeta
-from export.onnx_export import FLIP_TOL, LOGIT_ATOL, check_against_torch, torch_logits
+from export.onnx_export import FLIP_TOL, LOGIT_ATOL, check_against_torch, export_onnx, torch_logits
 from export.single_channel import to_single_channel
 
 
@@ -71,3 +72,12 @@ def test_check_fails_when_the_file_does_not_compute_the_model(exported):
         other.classifier.bias += 0.5
     with pytest.raises(ModelError, match="differs from PyTorch beyond tolerance"):
         check_against_torch(path, other, meta, dead_pixel_frames(0)[:2])
+
+
+def test_a_full_skip_model_exports_and_matches_pytorch(tmp_path):
+    with one_torch_thread():
+        model, meta = to_single_channel(*tiny_model(3, in_channels=3, extra_skip=True, full_skip=True))
+        path = export_onnx(model, meta, tmp_path / "full.onnx")
+    assert Segmenter(path, threads=1).meta.full_skip
+    check = check_against_torch(path, model, meta, dead_pixel_frames(1), "dead-pixel frames")
+    assert check.ok and check.max_abs_logit > 1.0

@@ -44,3 +44,13 @@ def test_metadata_that_contradicts_the_weights_is_refused():
     model, meta = tiny_model(0, in_channels=3)
     with pytest.raises(ModelError, match="3 channels but its metadata says 1"):
         to_single_channel(model, meta.with_(in_channels=1))
+
+
+def test_a_full_skip_model_converts_with_the_same_logits():
+    model, meta = tiny_model(2, in_channels=3, extra_skip=True, full_skip=True)
+    one, meta1 = to_single_channel(model, meta)
+    x1 = torch.from_numpy(preprocess(synthetic_frames(1, 2).depth[0], channels=1).x[None])
+    with torch.no_grad():
+        ref, got = model(x1.expand(-1, 3, -1, -1).contiguous()), one(x1)
+    torch.testing.assert_close(got, ref, atol=ATOL, rtol=1e-5)
+    assert meta1.full_skip and one.full_skip
