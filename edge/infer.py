@@ -275,7 +275,7 @@ class Segmenter:
             if len(outs) > 1:
                 valid = outs[1][0].astype(bool, copy=False)
             else:
-                valid = valid_mask(d)
+                valid = valid_mask(d, self.meta.sensor.max_range_m)
         else:
             pre = preprocess_for(d, self.meta)
             valid = pre.valid

@@ -2,7 +2,8 @@
 
 Why each step (paper III.D and Fig. 6):
 - ToF drivers mark pixels that did not return as 0 (REP 118 allows NaN); negative and inf
-  values also appear after filtering. All of them are *invalid* and must not bias statistics.
+  values also appear after filtering. All of them are *invalid* and must not bias statistics;
+  so are pixels beyond the model's sensor range (`preprocess_for`: a 16UC1 65535 is no return).
 - Standardising with the mean and std of the valid pixels only keeps dead corners from
   dragging the statistics, and makes the input independent of camera height.
 - Invalid pixels become 0 (the mean) after standardisation, so they look like "average" depth.
@@ -19,6 +20,7 @@ Numpy only: this module is on the edge path and must not import torch.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,11 +75,20 @@ def _as_frame(depth: np.ndarray) -> np.ndarray:
     return depth
 
 
-def valid_mask(depth: np.ndarray) -> np.ndarray:
-    """True where the sensor returned a usable range: finite and > 0."""
+def valid_mask(depth: np.ndarray, max_range_m: float = math.inf) -> np.ndarray:
+    """True where the sensor returned a usable range: finite, > 0 and not beyond ``max_range_m``.
+
+    Why the range: a 16UC1 driver marks saturated pixels 65535 mm; read as 65.5 m they are valid
+    numbers no ToF camera returns, and 40 of them moved the model's mask by 1 % (issue 9). The
+    model's input treats anything beyond its sensor's range (``ModelMeta.sensor.max_range_m``)
+    as no return; scoring keeps the plain rule (its labels decide what counts).
+    """
     depth = _as_frame(depth)
     with np.errstate(invalid="ignore"):
-        return np.isfinite(depth) & (depth > 0)
+        valid = np.isfinite(depth) & (depth > 0)
+        if max_range_m != math.inf:
+            valid &= depth <= np.float32(max_range_m)
+        return valid
 
 
 def standardize(
@@ -136,6 +147,7 @@ def preprocess(
     *,
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
+    max_range_m: float = math.inf,
 ) -> Preprocessed:
     """Raw depth (metres, any invalid marker) -> padded network input [C, Hp, Wp] float32.
 
@@ -145,6 +157,7 @@ def preprocess(
         multiple: pad H and W up to multiples of this.
         standardize_mode: see `standardize`.
         cues: extra channels after the depth copies, from `edge.cues.CUES`.
+        max_range_m: pixels farther than this are invalid (see `valid_mask`).
 
     Returns:
         `Preprocessed` with ``x`` of ``channels + len(cues)`` channels.
@@ -155,7 +168,7 @@ def preprocess(
     if bad:
         raise DataError(f"unknown input cue(s) {bad}; known: {list(CUES)}")
     depth = _as_frame(depth)
-    valid = valid_mask(depth)
+    valid = valid_mask(depth, max_range_m)
     z, mean, std = standardize(depth, valid, standardize_mode)
     planes = [z] * channels
     for cue in cues:
@@ -168,14 +181,16 @@ def preprocess(
 def preprocess_for(depth: np.ndarray, meta) -> Preprocessed:
     """`preprocess` with everything a model's `edge.meta.ModelMeta` says about its input."""
     return preprocess(
-        depth, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues)
+        depth, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues),
+        max_range_m=meta.sensor.max_range_m,
     )
 
 
 def preprocess_batch_for(frames: list[np.ndarray], meta) -> tuple[np.ndarray, np.ndarray]:
     """`preprocess_batch` with everything a model's `edge.meta.ModelMeta` says about its input."""
     return preprocess_batch(
-        frames, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues)
+        frames, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues),
+        max_range_m=meta.sensor.max_range_m,
     )
 
 
@@ -186,9 +201,11 @@ def preprocess_batch(
     *,
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
+    max_range_m: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stack frames of one size: (x [N, C, Hp, Wp], valid [N, H, W])."""
-    items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues) for f in frames]
+    items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues, max_range_m=max_range_m)
+             for f in frames]
     shapes = {it.shape for it in items}
     if len(shapes) != 1:
         raise DataError(f"frames in a batch must share one size, got {sorted(shapes)}")

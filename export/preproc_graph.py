@@ -4,7 +4,7 @@ Why: a C++ robot should need only onnxruntime. The wrapper below restates `edge.
 and `edge.cues` in tensor operations (the only other place that does; the tests prove the two
 agree), with a fixed frame size and no data-dependent shapes:
 
-- invalid = not finite or <= 0; invalid -> 0 after standardisation;
+- invalid = not finite, <= 0 or beyond sensor.max_range_m; invalid -> 0 after standardisation;
 - ``standardize="valid-pixels"``: mean and std over the valid pixels (float64 like numpy, std
   floored at ``STD_FLOOR``; no valid pixel -> mean 0, all zeros);
 - ``standardize="robust"``: the valid pixels of the ``STATS_STRIDE`` grid (all valid pixels when
@@ -232,6 +232,7 @@ class PreprocGraph(nn.Module):
         self.robust = meta.standardize == "robust"
         self.cues = tuple(meta.cues)
         self.h, self.w = meta.sensor.height, meta.sensor.width
+        self.max_range = float(np.float32(meta.sensor.max_range_m))  # edge.preprocess.valid_mask's range rule
         self.hp, self.wp = padded_shape(self.h, self.w, meta.pad_multiple)
         u, v = _grid_slots(self.h, self.w, GRID_STRIDE)
         self.g = len(u)
@@ -363,7 +364,7 @@ class PreprocGraph(nn.Module):
         return torch.clamp((zp - d) * torch.tensor(HEIGHT_SCALE, dtype=_F32), *HEIGHT_CLIP)
 
     def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        valid = torch.isfinite(depth) & (depth > 0)
+        valid = torch.isfinite(depth) & (depth > 0) & (depth <= self.max_range)
         d = torch.where(valid, depth, torch.zeros_like(depth)).to(_F64)
         if self.robust:
             mean, std = self._robust_stats(depth, valid)
@@ -492,7 +493,7 @@ def check_against_python(
     for d in frames:
         pred = seg.predict(d)
         ref_p = sigmoid(torch_logits(model, meta, d))
-        ref_v = valid_mask(d)
+        ref_v = valid_mask(d, meta.sensor.max_range_m)
         worst = max(worst, float(np.max(np.abs(pred.prob - ref_p))))
         mism += int(np.count_nonzero(pred.valid != ref_v))
         flips += int(np.count_nonzero(((pred.prob >= seg.threshold) != (ref_p >= seg.threshold)) & ref_v))

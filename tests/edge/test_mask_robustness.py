@@ -2,8 +2,9 @@
 
 With the paper's mean/std standardisation one valid pixel at 4 m (the floor past the table edge,
 a reflection) flipped ~20,000 of ~37,000 valid pixels, and 40 saturated 16UC1 pixels (65535 mm)
-did the same. The shipped model standardises robustly (edge.cues.robust_mean_std) and reads the
-height above the dominant plane, so these must change < 1 % of the mask.
+did the same. The shipped model standardises robustly (edge.cues.robust_mean_std), reads the
+height above the dominant plane, and its input treats pixels beyond its sensor's range (4 m) as
+no return, so these must change < 1 % of the mask.
 """
 
 from __future__ import annotations

@@ -28,6 +28,21 @@ def test_valid_mask_marks_zero_negative_nan_inf():
     assert v.sum() == d.size - 25 - 25 - 20 - 7 - 3
 
 
+def test_a_range_makes_farther_pixels_invalid_and_preprocess_for_uses_the_sensors():
+    from edge.meta import ModelMeta
+    from edge.preprocess import preprocess_for
+
+    d = frame()
+    d[30, :4] = [4.0, 4.0001, 65.535, 1e30]
+    assert valid_mask(d)[30, :4].all()  # the plain rule: any positive finite number
+    assert valid_mask(d, 4.0)[30, :4].tolist() == [True, False, False, False]
+    meta = ModelMeta(encoder="vgg11", in_channels=1)
+    pre = preprocess_for(d, meta)
+    assert meta.sensor.max_range_m == 4.0
+    assert pre.valid[30, :4].tolist() == [True, False, False, False]
+    assert (pre.x[0, 30, 1:4] == 0).all()  # no return -> 0, like a dead pixel
+
+
 def test_valid_pixels_have_mean_zero_std_one_and_invalid_become_zero():
     d = frame()
     p = preprocess(d, channels=1)

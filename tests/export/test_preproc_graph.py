@@ -49,6 +49,22 @@ def test_graph_equals_the_python_path_on_frames_with_dead_pixels(graphs):
     assert 0 < both.mean() < 1  # both classes present: the comparison is not vacuous
 
 
+def test_pixels_beyond_the_sensor_range_are_no_return_in_both_paths(graphs):
+    path, model, meta, plain = graphs
+    d = dead_pixel_frames(1)[0].copy()
+    far = np.zeros(d.shape, bool)
+    far[::17, ::13] = True  # a 16UC1 65535 read as metres, and a pixel just past the range
+    d[far] = 65.535
+    d[5, 7] = np.nextafter(np.float32(meta.sensor.max_range_m), np.float32(np.inf))
+    far[5, 7] = True
+    check = check_against_python(path, model, meta, [d])
+    assert check.ok and check.valid_mismatch == 0
+    for seg in (Segmenter(path, threads=1), Segmenter(plain, threads=1)):
+        pred = seg.predict(d)
+        assert not pred.valid[far].any() and (pred.mask[far] == 255).all()
+        np.testing.assert_array_equal(pred.valid, valid_mask(d) & ~far)
+
+
 def test_graph_and_plain_model_give_the_same_mask(graphs):
     path, model, meta, plain = graphs
     a, b = Segmenter(path, threads=1), Segmenter(plain, threads=1)
