@@ -29,7 +29,7 @@ from edge.errors import ConfigError, DataError, ModelError
 from edge.io.paths import check_input_file
 from edge.meta import ModelMeta
 from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
-from edge.preprocess import preprocess_batch_for, preprocess_for, valid_mask
+from edge.preprocess import preprocess_batch_for, preprocess_for, valid_for
 
 __all__ = [
     "check_logits",
@@ -275,7 +275,7 @@ class Segmenter:
             if len(outs) > 1:
                 valid = outs[1][0].astype(bool, copy=False)
             else:
-                valid = valid_mask(d, self.meta.sensor.max_range_m)
+                valid = valid_for(d, self.meta)
         else:
             pre = preprocess_for(d, self.meta)
             valid = pre.valid

@@ -31,6 +31,7 @@ from edge.errors import DataError
 __all__ = [
     "Preprocessed",
     "valid_mask",
+    "valid_for",
     "standardize",
     "padded_shape",
     "pad",
@@ -85,10 +86,12 @@ def valid_mask(depth: np.ndarray, max_range_m: float = math.inf) -> np.ndarray:
     """
     depth = _as_frame(depth)
     with np.errstate(invalid="ignore"):
-        valid = np.isfinite(depth) & (depth > 0)
-        if max_range_m != math.inf:
-            valid &= depth <= np.float32(max_range_m)
-        return valid
+        return np.isfinite(depth) & (depth > 0) & (depth <= np.float32(max_range_m))
+
+
+def valid_for(depth: np.ndarray, meta) -> np.ndarray:
+    """The pixels a model reads as returns: `valid_mask` within its sensor's range (`ModelMeta`)."""
+    return valid_mask(depth, meta.sensor.max_range_m)
 
 
 def standardize(

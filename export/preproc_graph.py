@@ -232,7 +232,7 @@ class PreprocGraph(nn.Module):
         self.robust = meta.standardize == "robust"
         self.cues = tuple(meta.cues)
         self.h, self.w = meta.sensor.height, meta.sensor.width
-        self.max_range = float(np.float32(meta.sensor.max_range_m))  # edge.preprocess.valid_mask's range rule
+        self.max_range = float(np.float32(meta.sensor.max_range_m))  # edge.preprocess.valid_for: no return beyond the range
         self.hp, self.wp = padded_shape(self.h, self.w, meta.pad_multiple)
         u, v = _grid_slots(self.h, self.w, GRID_STRIDE)
         self.g = len(u)
@@ -486,14 +486,14 @@ def check_against_python(
 ) -> PreprocCheck:
     """Run the self-contained file through `Segmenter` and compare with the Python path; raise above tolerance."""
     from edge.infer import Segmenter
-    from edge.preprocess import valid_mask
+    from edge.preprocess import valid_for
 
     seg = Segmenter(onnx_path, threads=threads)
     worst, mism, flips, n_valid = 0.0, 0, 0, 0
     for d in frames:
         pred = seg.predict(d)
         ref_p = sigmoid(torch_logits(model, meta, d))
-        ref_v = valid_mask(d, meta.sensor.max_range_m)
+        ref_v = valid_for(d, meta)
         worst = max(worst, float(np.max(np.abs(pred.prob - ref_p))))
         mism += int(np.count_nonzero(pred.valid != ref_v))
         flips += int(np.count_nonzero(((pred.prob >= seg.threshold) != (ref_p >= seg.threshold)) & ref_v))

@@ -27,7 +27,7 @@ EPOCHS=${EPOCHS:-11}
 MINUTES=${MINUTES:-55}
 CONFIG=${CONFIG:-tools/default_sim_config.json}
 INSTALL=${INSTALL:-1}  # 0: train a candidate in $RUN without installing it as the default
-FLAGS=${FLAGS:-}  # further depthseg-train flags for a candidate, e.g. FLAGS=--full-skip
+FLAGS=${FLAGS:-}  # further depthseg-train flags for a candidate, split on spaces (v8 was FLAGS=--full-skip before it joined the recipe)
 start=$(date +%s)
 $BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config "$CONFIG"
 $BIN/depthseg-train --data "$DATA" --out "$RUN" --encoder vgg11 --batch-norm --width 0.125 \

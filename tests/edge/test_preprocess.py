@@ -30,7 +30,7 @@ def test_valid_mask_marks_zero_negative_nan_inf():
 
 def test_a_range_makes_farther_pixels_invalid_and_preprocess_for_uses_the_sensors():
     from edge.meta import ModelMeta
-    from edge.preprocess import preprocess_for
+    from edge.preprocess import preprocess_for, valid_for
 
     d = frame()
     d[30, :4] = [4.0, 4.0001, 65.535, 1e30]
@@ -40,6 +40,7 @@ def test_a_range_makes_farther_pixels_invalid_and_preprocess_for_uses_the_sensor
     pre = preprocess_for(d, meta)
     assert meta.sensor.max_range_m == 4.0
     assert pre.valid[30, :4].tolist() == [True, False, False, False]
+    np.testing.assert_array_equal(valid_for(d, meta), pre.valid)  # the one rule, for callers without x
     assert (pre.x[0, 30, 1:4] == 0).all()  # no return -> 0, like a dead pixel
 
 
