@@ -192,6 +192,13 @@ def check_fields(obj: Any, section: str) -> None:
         check_value(f"{section}.{f.name}", getattr(obj, f.name), hints[f.name])
 
 
+def _check_kinds(name: str, kinds: tuple[str, ...], allowed: tuple[str, ...]) -> None:
+    """A non-empty list of shape names from ``allowed``, or one ConfigError naming the bad ones."""
+    bad = [k for k in kinds if k not in allowed]
+    if not kinds or bad:
+        raise ConfigError(f"{name}: unknown {bad or 'empty list'}; choose from {list(allowed)}")
+
+
 def check_range(name: str, value: Any, lo_bound: float | None = None, hi_bound: float | None = None) -> tuple:
     """A (min, max) pair of finite numbers with min <= max, inside optional bounds."""
     if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(is_number(v) for v in value)):
@@ -367,15 +374,11 @@ class SceneConfig:
                 f"scene.thin_thickness_m max {self.thin_thickness_m[1]} is above the smallest largest_dim_m "
                 f"{self.largest_dim_m[0]}; lower it"
             )
-        bad = [s for s in self.thin_shapes if s not in THIN_KINDS]
-        if not self.thin_shapes or bad:
-            raise ConfigError(f"scene.thin_shapes: unknown {bad or 'empty list'}; choose from {list(THIN_KINDS)}")
+        _check_kinds("scene.thin_shapes", self.thin_shapes, THIN_KINDS)
         check_number("scene.long_fraction", self.long_fraction, 0.0, 1.0)
         check_range("scene.long_length_m", self.long_length_m, 0.005, 2.0)
         check_range("scene.long_diameter_m", self.long_diameter_m, 0.001, 0.5)
-        bad = [s for s in self.long_shapes if s not in LONG_KINDS]
-        if not self.long_shapes or bad:
-            raise ConfigError(f"scene.long_shapes: unknown {bad or 'empty list'}; choose from {list(LONG_KINDS)}")
+        _check_kinds("scene.long_shapes", self.long_shapes, LONG_KINDS)
         check_number("scene.table_edge_prob", self.table_edge_prob, 0.0, 1.0)
         check_range("scene.table_edge_dist_m", self.table_edge_dist_m, 0.0, 10.0)
         check_range("scene.floor_drop_m", self.floor_drop_m, 0.01, 10.0)

@@ -291,10 +291,14 @@ def fit_mesh(vertices: np.ndarray, largest: float, thin: float) -> tuple[np.ndar
 # --------------------------------------------------------------------------- procedural shapes
 
 
-def _box(rng, largest, thin):
-    d = _dims(rng, largest, thin, 3)
+def _box_shape(d: np.ndarray):
+    """A box of side lengths ``d`` with its native collider: (verts, tris, parts, params)."""
     v, t = _box_mesh(d / 2)
     return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+
+
+def _box(rng, largest, thin):
+    return _box_shape(_dims(rng, largest, thin, 3))
 
 
 def _cylinder_mesh(r: float, h: float):
@@ -493,8 +497,7 @@ def _disc(rng, largest, thick):
 def _plate(rng, largest, thick):
     """A card / lid / cutting board: a thin box."""
     d = np.array([largest, rng.uniform(0.4, 1.0) * largest, thick])
-    v, t = _box_mesh(d / 2)
-    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+    return _box_shape(d)
 
 
 def _ring_shape(rng, largest, thick, seg: int = 8):
@@ -514,8 +517,7 @@ def _ring_shape(rng, largest, thick, seg: int = 8):
 def _bar(rng, largest, thick):
     """A ruler / spatula / flat tool: long and narrow."""
     d = np.array([largest, max(rng.uniform(0.08, 0.25) * largest, thick), thick])
-    v, t = _box_mesh(d / 2)
-    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+    return _box_shape(d)
 
 
 def _lshape(rng, largest, thick):
@@ -550,8 +552,13 @@ def make_thin_shape(kind: str, rng: np.random.Generator, largest: float, thickne
     return _generate(_THIN_GENERATORS, "thin shape", kind, rng, largest, thickness, info)
 
 
+def _pick(rng: np.random.Generator, kinds: Sequence[str]) -> str:
+    """One of ``kinds``, uniformly (one integer draw)."""
+    return str(kinds[int(rng.integers(len(kinds)))])
+
+
 def random_thin(rng: np.random.Generator, largest: float, thickness: float, kinds: Sequence[str]) -> Shape:
-    return make_thin_shape(str(kinds[int(rng.integers(len(kinds)))]), rng, largest, thickness)
+    return make_thin_shape(_pick(rng, kinds), rng, largest, thickness)
 
 
 # --------------------------------------------------------------------------- long shapes
@@ -570,8 +577,7 @@ def _handle(rng, length, diam):
 def _stick(rng, length, diam):
     """A wooden spoon's handle / a square rod: a box along body z, its cross-section not square."""
     d = np.array([diam, diam * rng.uniform(0.5, 1.5), length])
-    v, t = _box_mesh(d / 2)
-    return v, t, (Part("box", tuple(d / 2)),), {"size_m": d.round(5).tolist()}
+    return _box_shape(d)
 
 
 _LONG_GENERATORS: dict[str, Callable] = {"rod": _rod, "handle": _handle, "stick": _stick}
@@ -584,7 +590,7 @@ def make_long_shape(kind: str, rng: np.random.Generator, length: float, diameter
 
 
 def random_long(rng: np.random.Generator, length: float, diameter: float, kinds: Sequence[str]) -> Shape:
-    return make_long_shape(str(kinds[int(rng.integers(len(kinds)))]), rng, length, diameter)
+    return make_long_shape(_pick(rng, kinds), rng, length, diameter)
 
 
 # --------------------------------------------------------------------------- mesh library
