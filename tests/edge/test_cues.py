@@ -121,3 +121,28 @@ def test_preprocess_adds_cue_channels_after_the_depth_copies() -> None:
     assert not p.x[:, H:, :].any()
     with pytest.raises(Exception, match="unknown input cue"):
         preprocess(z, 1, cues=("normals",))
+
+
+def test_quantiles_are_numpys_value_for_value() -> None:
+    # the edge path replaces np.quantile by one partition; the trimming bounds must not move
+    from edge.cues import TRIM, _quantiles
+
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 57, 1000, 2431):
+        for vals in (rng.random(n), np.round(rng.random(n), 2), rng.normal(0.3, 0.01, n)):
+            assert _quantiles(vals, TRIM) == list(np.quantile(vals, TRIM))
+
+
+def test_height_cue_equals_the_plain_expression() -> None:
+    # the in-place arithmetic of height_cue and PlaneFit.depth gives the plain formula's float32 values
+    z, _ = _scene(np.random.default_rng(5))
+    z[40:44, 50:60] = 65.535  # saturated pixels, as read by a model without a range rule
+    valid = valid_mask(z)
+    fit = fit_dominant_plane(z, valid)
+    ar_u, ar_v = np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32)
+    inv = (np.float32(fit.a) * ar_u[None, :] + np.float32(fit.b) * ar_v[:, None]) + np.float32(fit.c)
+    zp = 1.0 / np.maximum(inv, np.float32(1e-6))
+    d = np.where(valid, z, zp).astype(np.float32)
+    plain = np.clip((zp - d) * np.float32(100.0), *HEIGHT_CLIP).astype(np.float32)
+    np.testing.assert_array_equal(fit.depth((H, W)), zp)
+    np.testing.assert_array_equal(height_cue(z, valid), plain)
