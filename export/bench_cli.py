@@ -18,7 +18,8 @@ Per model: session load, first run, then over the timed runs the inference laten
 (p50/p90/p99/mean/min/max ms), the whole-frame latency (preprocessing + inference +
 postprocessing, raw depth -> mask) and frames/s (1000 / mean whole-frame ms), each stage timed
 separately, model size, precision, and memory. Several models are timed round-robin in one
-run so machine noise hits all alike; the table gives each model's ratio to the first.
+run, in turns of --block consecutive frames, so machine noise hits all alike while each model
+keeps warm caches as it would running alone; the table gives each model's ratio to the first.
 Frames: the first --frames frames of --data (simulated MCAP), else seeded synthetic frames
 (table, objects, dead corners, dead and NaN pixels).
 """
@@ -46,6 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=int, default=200, help="timed runs per model (default 200)")
     p.add_argument("--warmup", type=int, default=20, help="untimed runs per model first (default 20)")
     p.add_argument("--data", type=Path, default=None, help="simulated MCAP file or directory to take frames from")
+    p.add_argument("--block", type=int, default=None,
+                   help="consecutive timed runs of one model before the next takes its turn (default 10: each model "
+                        "times with warm caches, as it runs alone on the robot; 1: models alternate every frame)")
     p.add_argument("--frames", type=int, default=8, help="distinct frames, cycled through the runs (default 8)")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic frames (default 0)")
     p.add_argument("--spin", action="store_true",
@@ -97,7 +101,8 @@ def format_report(res: dict[str, Any]) -> str:
         f"onnxruntime {res['runtime']['onnxruntime']}, intra-op threads {res['threads']}, inter-op 1, sequential, "
         f"thread spinning {'on' if res['spin'] else 'off'}",
         f"CPU: {cpu['model']} ({cpu['usable_cpus']} usable of {cpu['logical_cpus']} logical CPUs); ISA: {' '.join(cpu['isa'])}",
-        f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin",
+        f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin"
+        + (f" in blocks of {res['block']} runs" if res.get("block", 1) > 1 else " (models alternate every frame)"),
         "times in ms; 'inf' = session.run only; 'frame' = raw depth -> mask (pre + inf + post); fps = 1000 / mean frame ms; "
         "'x first' = frame p50 / the first model's",
     ]
@@ -120,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             res = benchmark(args.model, compare=args.compare, threads=args.threads, runs=args.runs,
                             warmup=args.warmup, data=args.data, frames=args.frames, seed=args.seed, spin=args.spin,
-                            torch=args.torch, on_round=lambda _r: bar.update(1))
+                            torch=args.torch, block=args.block, on_round=lambda _r: bar.update(1))
         finally:
             bar.close()
         if args.json:

@@ -43,6 +43,7 @@ def benchmark(
     spin: bool = False,
     torch: bool = False,
     on_round: Callable[[int], None] | None = None,
+    block: int | None = None,
 ) -> dict[str, Any]:
     """Time models round-robin on this CPU (`edge.bench.bench_models`); the ``depthseg-bench --json`` object.
 
@@ -57,7 +58,9 @@ def benchmark(
         seed: seed of the synthetic frames.
         spin: let onnxruntime's threads busy-wait between kernels.
         torch: also time PyTorch eager for each model's architecture (imports torch).
-        on_round: called after each round over all models (progress).
+        on_round: called with the run index after each run of every model (progress).
+        block: consecutive timed runs of one model before the next takes its turn (None:
+            `edge.bench.DEFAULT_BLOCK`; see `edge.bench.bench_models`).
 
     Returns:
         ``cpu``, ``runtime``, ``threads``, ``runs``, ``warmup``, ``frames`` (their source), ``peak_rss_mb``,
@@ -67,7 +70,7 @@ def benchmark(
         ConfigError: threads or frames below 1, or a bad ``compare`` item.
         ModelError: a model file is missing or unreadable.
     """
-    from edge.bench import ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
+    from edge.bench import DEFAULT_BLOCK, ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
     from edge.cliutil import require
     from edge.defaults import resolve_model
     from edge.io.paths import check_input_file
@@ -77,6 +80,9 @@ def benchmark(
         raise ConfigError(f"`threads` must be >= 1, got {threads}")
     if frames < 1:
         raise ConfigError(f"`frames` must be >= 1, got {frames}")
+    block = DEFAULT_BLOCK if block is None else int(block)
+    if block < 1:
+        raise ConfigError(f"`block` must be >= 1, got {block}")
     archs = [parse_compare(c) for c in compare]
     for m in models or ():
         check_input_file(m, "model")  # a FIFO would block onnxruntime's read forever
@@ -95,7 +101,8 @@ def benchmark(
 
             out = export_random(enc, Path(td) / f"compare-{enc}-w{width:g}.onnx", width=width, threads=threads)
             specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=threads))
-        results = bench_models(specs, sample.depth, runs=runs, warmup=warmup, spin=spin, on_round=on_round)
+        results = bench_models(specs, sample.depth, runs=runs, warmup=warmup, spin=spin, on_round=on_round,
+                               block=block)
         if torch:
             from edge.infer import Segmenter
             from edge.train.timing import time_torch
@@ -111,6 +118,7 @@ def benchmark(
         "spin": bool(spin),
         "runs": runs,
         "warmup": warmup,
+        "block": block,
         "frames": sample.source,
         "peak_rss_mb": peak_rss_mb(),
         "models": results,

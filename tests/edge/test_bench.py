@@ -139,3 +139,31 @@ def test_compare_exports_in_process_and_adds_the_model(models, tiny_onnx, monkey
     assert b["ratio_to_first"] == pytest.approx(b["whole_frame_p50_ms"] / a["whole_frame_p50_ms"])
     assert main(["--model", str(models[0]), "--compare", "vgg13:x"]) == 2
     assert "--compare" in capsys.readouterr().err
+
+
+def test_bench_models_times_turns_of_block_frames(models, monkeypatch):
+    # each model runs `block` frames in a row, the first model of a turn rotates, every model gets every run
+    from edge.infer import Segmenter
+
+    plain, raw = models
+    specs = [ModelSpec(plain, threads=1), ModelSpec(raw, name="raw", threads=1)]
+    calls: list[str] = []
+    original = Segmenter.predict
+
+    def predict(self, depth, threshold=None):
+        calls.append(self.name)
+        return original(self, depth, threshold)
+
+    monkeypatch.setattr(Segmenter, "predict", predict)
+    for block in (1, 3):
+        calls.clear()
+        rounds = []
+        bench_models(specs, synthetic_frames(2).depth, runs=5, warmup=0, on_round=rounds.append, block=block)
+        timed = [Path(c).stem for c in calls[2:]]  # after one first run per model
+        assert rounds == list(range(5))
+        if block == 1:
+            assert timed == ["plain", "raw", "raw", "plain", "plain", "raw", "raw", "plain", "plain", "raw"]
+        else:
+            assert timed == ["plain"] * 3 + ["raw"] * 3 + ["raw"] * 2 + ["plain"] * 2
+    with pytest.raises(ConfigError, match="block"):
+        bench_models(specs, synthetic_frames(1).depth, runs=2, block=0)
