@@ -30,6 +30,7 @@ examples:
   depthseg-bench --threads 2 --compare vgg16                   # ... against the paper's VGG16 FCN-8s
   depthseg-bench --model a.onnx b.onnx --runs 500 --json
   depthseg-bench --model a.onnx --torch                        # also PyTorch eager (imports torch; <= 50 runs)
+  depthseg-bench --threads 1 2                                 # the default model at 1 and at 2 threads, interleaved
 """
 
 
@@ -40,7 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_version(p, PROG)
     p.add_argument("--model", type=Path, nargs="+", default=None,
                    help="ONNX model(s) from depthseg-export (default: the shipped edge/models/default.onnx)")
-    p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
+    p.add_argument("--threads", type=int, nargs="+", default=[2],
+                   help="onnxruntime intra-op threads (default 2); several counts time every model at each, "
+                        "interleaved (e.g. --threads 1 2)")
     p.add_argument("--compare", action="append", default=[], metavar="ENCODER[:WIDTH]",
                    help="also time this architecture with random weights, 3 channels, fp32 (e.g. vgg16 = the paper's "
                         "FCN-8s; width 1 unless given); exported in-process to a temp file; repeatable")
@@ -123,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
 
         bar = progress(total=args.runs, desc="bench")
         try:
-            res = benchmark(args.model, compare=args.compare, threads=args.threads, runs=args.runs,
+            res = benchmark(args.model, compare=args.compare, threads=args.threads if len(args.threads) > 1 else args.threads[0], runs=args.runs,
                             warmup=args.warmup, data=args.data, frames=args.frames, seed=args.seed, spin=args.spin,
                             torch=args.torch, block=args.block, on_round=lambda _r: bar.update(1))
         finally:

@@ -34,7 +34,7 @@ def benchmark(
     models: Sequence[str | Path] | None = None,
     *,
     compare: Sequence[str] = (),
-    threads: int = 2,
+    threads: int | Sequence[int] = 2,
     runs: int = 200,
     warmup: int = 20,
     data: str | Path | None = None,
@@ -50,7 +50,8 @@ def benchmark(
     Args:
         models: ONNX files; None = the shipped default.
         compare: architectures ``ENCODER[:WIDTH]`` exported in-process with random weights and timed too.
-        threads: onnxruntime intra-op threads.
+        threads: onnxruntime intra-op threads, or several counts: every model is then timed at
+            each (named ``"<model> t<N>"``), interleaved in the one run.
         runs: timed runs per model.
         warmup: untimed runs per model first.
         data: simulated MCAP file or directory to take frames from (None: synthetic frames).
@@ -76,8 +77,9 @@ def benchmark(
     from edge.io.paths import check_input_file
     from edge.sampleframes import sample_frames
 
-    if threads < 1:
-        raise ConfigError(f"`threads` must be >= 1, got {threads}")
+    counts = [int(threads)] if isinstance(threads, int) else [int(t) for t in threads]
+    if not counts or min(counts) < 1 or len(set(counts)) != len(counts):
+        raise ConfigError(f"`threads` must be distinct counts >= 1, got {threads}")
     if frames < 1:
         raise ConfigError(f"`frames` must be >= 1, got {frames}")
     block = DEFAULT_BLOCK if block is None else int(block)
@@ -93,27 +95,29 @@ def benchmark(
     if torch:
         require("train", ("torch",), "`torch` (PyTorch eager timing)")
     paths = list(models or [resolve_model(None, kinds=("onnx",))])
-    specs = [ModelSpec(p, threads=threads) for p in paths]
     sample = sample_frames(data, frames, seed)
     with tempfile.TemporaryDirectory(prefix="depthseg-bench-") as td:
+        named = [(Path(p), Path(p).stem) for p in paths]
         for enc, width in archs:
             from export.api import export_random  # torch: only when comparing, before any timing
 
-            out = export_random(enc, Path(td) / f"compare-{enc}-w{width:g}.onnx", width=width, threads=threads)
-            specs.append(ModelSpec(out, name=f"{enc} w{width:g} (random, paper-style 3ch)", threads=threads))
+            out = export_random(enc, Path(td) / f"compare-{enc}-w{width:g}.onnx", width=width, threads=counts[0])
+            named.append((out, f"{enc} w{width:g} (random, paper-style 3ch)"))
+        suffix = (lambda t: f" t{t}") if len(counts) > 1 else (lambda t: "")
+        specs = [ModelSpec(p, name=name + suffix(t), threads=t) for p, name in named for t in counts]
         results = bench_models(specs, sample.depth, runs=runs, warmup=warmup, spin=spin, on_round=on_round,
                                block=block)
         if torch:
             from edge.infer import Segmenter
             from edge.train.timing import time_torch
 
-            segs = [Segmenter(spec.path, threads=threads) for spec in specs]
+            segs = [Segmenter(spec.path, threads=spec.threads) for spec in specs]
             for m, t in zip(results, time_torch(segs, sample.depth, runs=min(runs, 50), warmup=max(3, min(warmup, 10)))):
                 m.update(t)
     return {
         "cpu": cpu_info(),
         "runtime": runtime_info(),
-        "threads": threads,
+        "threads": counts[0] if len(counts) == 1 else counts,
         "inter_op_threads": 1,
         "spin": bool(spin),
         "runs": runs,

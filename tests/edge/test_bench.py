@@ -167,3 +167,13 @@ def test_bench_models_times_turns_of_block_frames(models, monkeypatch):
             assert timed == ["plain"] * 3 + ["raw"] * 3 + ["raw"] * 2 + ["plain"] * 2
     with pytest.raises(ConfigError, match="block"):
         bench_models(specs, synthetic_frames(1).depth, runs=2, block=0)
+
+
+def test_cli_times_every_model_at_each_thread_count(models, capsys):
+    rc = main(["--model", str(models[0]), "--threads", "1", "2", "--runs", "2", "--warmup", "1", "--json"])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(capsys.readouterr().out)
+    assert [(m["name"], m["threads"]) for m in res["models"]] == [("plain t1", 1), ("plain t2", 2)]
+    assert res["threads"] == [1, 2] and res["block"] == 10
+    assert main(["--model", str(models[0]), "--threads", "2", "2"]) == 2  # counts must be distinct
+    assert "distinct" in capsys.readouterr().err
