@@ -42,6 +42,19 @@ def _frames(per_set: int) -> list[np.ndarray]:
     return out or sample_frames(None, 8, 0).depth
 
 
+def _hostile(frames: list[np.ndarray]) -> list[np.ndarray]:
+    """Frames a driver can send: 40 saturated 16UC1 pixels (65.535 m), all NaN but a few, constant."""
+    rng = np.random.default_rng(0)
+    out = []
+    for d in frames[:10]:
+        sat = d.copy()
+        sat[rng.integers(0, d.shape[0], 40), rng.integers(0, d.shape[1], 40)] = 65.535
+        few = np.full_like(d, np.nan)
+        few[5:7, 5:9] = 0.3
+        out += [sat, few, np.full_like(d, 0.35)]
+    return out
+
+
 def _p50(fn, frames: list[np.ndarray], runs: int) -> float:
     ts = []
     for r in range(runs):
@@ -70,9 +83,11 @@ def main() -> int:
     ap.add_argument("--model", default=None, help="ONNX model whose metadata says how to preprocess (default: shipped)")
     ap.add_argument("--runs", type=int, default=2000, help="timed calls per variant (default 2000)")
     ap.add_argument("--against", metavar="REV", default=None, help="git revision to compare with, interleaved")
+    ap.add_argument("--frames-per-set", type=int, default=8,
+                    help="frames taken from each data set (default 8); the identity check adds 30 hostile frames")
     args = ap.parse_args()
     meta = Segmenter(args.model, threads=1).meta
-    frames = _frames(8)
+    frames = _frames(args.frames_per_set)
     print(f"{len(frames)} frames ({', '.join(s for s in SETS if (ROOT / s).exists()) or 'synthetic'}); "
           f"p50 of {args.runs} calls, ms")
     valid = lambda d: P.valid_for(d, meta)  # noqa: E731
@@ -90,7 +105,8 @@ def main() -> int:
         return 0
     with tempfile.TemporaryDirectory() as td:
         old = _old_preprocess(args.against, Path(td))
-        same = all(np.array_equal(old.preprocess_for(d, meta).x, P.preprocess_for(d, meta).x) for d in frames)
+        checked = frames + _hostile(frames)
+        same = all(np.array_equal(old.preprocess_for(d, meta).x, P.preprocess_for(d, meta).x) for d in checked)
         ts: dict[str, list[float]] = {"old": [], "new": []}
         for r in range(args.runs):
             d = frames[r % len(frames)]
@@ -101,7 +117,8 @@ def main() -> int:
                 ts[name].append(time.perf_counter() - t0)
     o, n = (float(np.median(ts[k]) * 1e3) for k in ("old", "new"))
     print(f"preprocess_for, interleaved: {args.against} {o:.3f} ms, working tree {n:.3f} ms, ratio {n / o:.2f}; "
-          f"input tensors {'byte-identical' if same else 'DIFFER'} on all {len(frames)} frames")
+          f"input tensors {'byte-identical' if same else 'DIFFER'} on all {len(checked)} frames "
+          f"({len(checked) - len(frames)} of them hostile)")
     return 0 if same else 1
 
 
