@@ -33,6 +33,11 @@ parser.add_argument(
     "--threshold", "-t", type=float, default=None,
     help="decision boundary on the object probability (default: the one stored in the model, else 0.5)",
 )
+parser.add_argument(
+    "--min-object-px", type=int, default=None, metavar="PX",
+    help="object specks (8-connected) under PX pixels become background (default: the model's rule, 6 px "
+         "unless stored otherwise; 0 keeps every object pixel)",
+)
 parser.add_argument("--json", action="store_true", help="print one JSON object (fractions in [0, 1]) instead of a table")
 parser.add_argument("--figures", metavar="DIR", default=None, help="write PNG overlays like the paper's Fig. 5 here")
 parser.add_argument("--max-figures", type=int, default=8, metavar="N", help="number of figures to write (default 8)")
@@ -145,7 +150,8 @@ def format_table(report: EvalReport, model_name: str) -> str:
         ]
         lines += _score_rows([f"{n} [void band]" for n in names], ignored)
     notes = [
-        f"{report.frames} frames, threshold {report.threshold:g}; each score is the mean over frames in % "
+        f"{report.frames} frames, threshold {report.threshold:g}, model's object specks under {report.min_object_px} px "
+        "removed; each score is the mean over frames in % "
         "(pooled IoU: over all valid pixels of all frames).",
     ]
     if report.metrics.skipped:
@@ -170,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
             max_figures=args.max_figures, figures_pick=args.figures_pick, depth_topic=args.depth_topic,
             labels_topic=args.labels_topic, depth_scale=args.depth_scale, limit=args.limit, threads=args.threads,
             boundary_px=args.boundary_px,
-            ignore_boundary=args.ignore_boundary,
+            ignore_boundary=args.ignore_boundary, min_object_px=args.min_object_px,
             wrap=lambda frames, total: progress(frames, total=total, desc="eval", unit="frame"),
         )
         if args.json:

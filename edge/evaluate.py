@@ -42,7 +42,7 @@ from edge.metrics import (
     boundary_band,
     confusion,
     frame_scores,
-    predict_mask,
+    object_mask,
     threshold_logit,
 )
 from edge.preprocess import standardize, valid_mask
@@ -68,6 +68,7 @@ class EvalReport:
     model: str
     threshold: float
     metrics: MetricSummary
+    min_object_px: int = 0  # the speck rule applied to the model's masks (edge.postprocess)
     baseline: MetricSummary | None = None
     baseline_params: dict[str, Any] | None = None
     unlabelled: int = 0
@@ -84,7 +85,8 @@ class EvalReport:
         return self.metrics.frames
 
     def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"model": self.model, "threshold": self.threshold, "unlabelled_frames": self.unlabelled}
+        d: dict[str, Any] = {"model": self.model, "threshold": self.threshold, "min_object_px": self.min_object_px,
+                             "unlabelled_frames": self.unlabelled}
         d.update(self.metrics.to_dict())
         self._add_extra_scores(d, self.breakdown, self.ignore_boundary)
         if self.baseline is not None:
@@ -221,6 +223,7 @@ def evaluate(
     limit: int | None = None,
     boundary_px: int = DEFAULT_BOUNDARY_PX,
     ignore_boundary: int | None = None,
+    min_object_px: int | None = None,
 ) -> EvalReport:
     """Stream ``frames`` through ``predictor`` and score them (frames without labels are counted, not scored).
 
@@ -231,12 +234,17 @@ def evaluate(
     that many labelled frames. ``boundary_px`` is the band around true object boundaries that
     splits the errors into the breakdown (`edge.metrics.boundary_band`); ``ignore_boundary``
     (pixels, or None for off) adds a second set of scores with a void band of that width around
-    the true boundaries left out, PASCAL VOC style.
+    the true boundaries left out, PASCAL VOC style. ``min_object_px`` defaults to the model's
+    speck rule (``meta.min_object_px``; `edge.postprocess`), else 0 (every object pixel kept).
     """
     meta = getattr(predictor, "meta", None)
     if threshold is None:
         threshold = float(meta.threshold) if meta is not None else 0.5
     threshold_logit(threshold)  # checks it lies in (0, 1) before any frame is run
+    if min_object_px is None:
+        min_object_px = int(meta.min_object_px) if meta is not None else 0
+    if min_object_px < 0:
+        raise ConfigError(f"`min_object_px` must be >= 0, got {min_object_px}")
     if figure_pick not in FIGURE_PICKS:
         raise ConfigError(f"unknown figure pick '{figure_pick}'; choose from {', '.join(FIGURE_PICKS)}")
     if max_figures < 0:
@@ -272,7 +280,7 @@ def evaluate(
             raise DataError(f"frame at t={fr.stamp_ns} ns: label shape {label.shape} differs from depth shape {depth.shape}")
         valid = valid_mask(depth)
         logits = checked_logits(predictor, depth)
-        pred = predict_mask(logits, threshold)
+        pred = object_mask(logits, valid, threshold, min_object_px)
         outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
         s = acc.add(pred, label, valid, outside_void)
         bpred = None
@@ -304,6 +312,7 @@ def evaluate(
     return EvalReport(
         model=getattr(predictor, "name", "model"),
         threshold=float(threshold),
+        min_object_px=int(min_object_px),
         metrics=acc.plain.summary(),
         baseline=bacc.plain.summary() if bacc is not None else None,
         baseline_params=asdict(base) if base is not None else None,

@@ -141,7 +141,8 @@ def _one_line(exc: BaseException) -> str:
 class Segmenter:
     """Object/table segmentation of raw depth frames with an exported ONNX model.
 
-    ``threshold`` overrides the one stored in the model (for experiments); ``spin`` lets
+    ``threshold`` and ``min_object_px`` override the ones stored in the model (for experiments;
+    ``min_object_px`` 0 keeps every object pixel); ``spin`` lets
     onnxruntime's worker threads busy-wait between kernels: it can shave a little latency on
     cores nobody else uses, and costs a lot on shared ones (see `session_options`).
     """
@@ -153,6 +154,7 @@ class Segmenter:
         threshold: float | None = None,
         providers: Sequence[str] = ("CPUExecutionProvider",),
         spin: bool = False,
+        min_object_px: int | None = None,
     ) -> None:
         import onnxruntime as ort
 
@@ -177,6 +179,9 @@ class Segmenter:
         self.threshold = self.meta.threshold if threshold is None else float(threshold)
         if not 0.0 < self.threshold < 1.0:
             raise ConfigError(f"threshold must lie in (0, 1), got {self.threshold}")
+        self.min_object_px = self.meta.min_object_px if min_object_px is None else int(min_object_px)
+        if self.min_object_px < 0:
+            raise ConfigError(f"min_object_px must be >= 0, got {self.min_object_px}")
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         if len(inputs) != 1:
             raise ModelError(f"{path}: expected one input '{INPUT_NAME}', found {[i.name for i in inputs]}")
@@ -284,9 +289,11 @@ class Segmenter:
             t2 = time.perf_counter()
             logits = check_logits(out[0, 0, :h, :w], self.name)
             prob = sigmoid(logits)
-        # The one threshold rule (edge.metrics): logits against logit(threshold), as eval, tune
-        # and replay decide; float32 probabilities cannot separate thresholds near 1 (0.9999).
-        mask = segmentation_mask(logits, valid, self.threshold if threshold is None else float(threshold))
+        # The one threshold rule (edge.metrics): logits against logit(threshold), as eval, tune and
+        # replay decide (float32 probabilities cannot separate thresholds near 1, 0.9999); then specks.
+        mask = segmentation_mask(
+            logits, valid, self.threshold if threshold is None else float(threshold), self.min_object_px
+        )
         t3 = time.perf_counter()
         timings = {
             "pre": (t1 - t0) * 1e3,

@@ -19,7 +19,7 @@ from edge.errors import ModelError
 from edge.preprocess import STANDARDIZE_MODES
 from edge.values import is_finite, show
 
-__all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics", "MAX_SENSOR_SIDE", "MAX_PAD_MULTIPLE"]
+__all__ = ["SensorSpec", "ModelMeta", "META_KEY", "fov_intrinsics", "MAX_SENSOR_SIDE", "MAX_PAD_MULTIPLE", "MIN_OBJECT_PX"]
 
 META_KEY = "depthseg"
 SCHEMA_VERSION = 1
@@ -35,6 +35,7 @@ MAX_PARAMS = 10**11
 MAX_TEXT = 4096  # characters of a free-text field (names, policy)
 MAX_NESTING = 32  # depth of the free-form ``training`` record
 MAX_DISTORTION = 16  # OpenCV models have at most 14 coefficients
+MIN_OBJECT_PX = 6  # the speck rule's default (edge.postprocess: why 6)
 
 
 def _bad(key: str, value: Any, want: str) -> ModelError:
@@ -176,6 +177,9 @@ class ModelMeta:
     cues: tuple[str, ...] = ()  # extra input channels after the depth copies (edge.cues.CUES)
     threshold: float = 0.5
     threshold_policy: str = "default 0.5 (paper)"
+    # after the threshold, object components (8-connected) under this many pixels become
+    # background (edge.postprocess); 0 keeps every pixel. Models from before the rule get it too.
+    min_object_px: int = MIN_OBJECT_PX
     sensor: SensorSpec = field(default_factory=SensorSpec)
     params: int = 0
     training: dict[str, Any] = field(default_factory=dict)
@@ -207,6 +211,7 @@ class ModelMeta:
         put(self, "cues", cues)
         put(self, "threshold", _float("threshold", self.threshold, 0.0, 1.0, open_lo=True, open_hi=True))
         put(self, "threshold_policy", _str("threshold_policy", self.threshold_policy))
+        put(self, "min_object_px", _int("min_object_px", self.min_object_px, 0, MAX_SENSOR_PIXELS))
         if not isinstance(self.sensor, SensorSpec):
             raise _bad("sensor", self.sensor, "must be a sensor description (a JSON object)")
         put(self, "params", _int("params", self.params, 0, MAX_PARAMS))
@@ -277,6 +282,8 @@ class ModelMeta:
             META_KEY: self.to_json(),
             "threshold": repr(float(self.threshold)),
             "threshold_policy": self.threshold_policy,
+            "postprocessing": f"object (logit >= logit(threshold), valid) components, 8-connected, under "
+            f"{self.min_object_px} px -> background",
             "encoder": self.encoder,
             "width": repr(float(self.width)),
             "in_channels": str(self.in_channels),

@@ -25,7 +25,9 @@ predicted object when sigmoid(logit) >= threshold (the paper: values under the d
 are background, all others object), evaluated as ``logit >= logit(threshold)``
 (`threshold_logit`, `predict_mask`, `segmentation_mask`). Comparing float32 probabilities
 instead gives other classes near extreme thresholds: at the paper's 0.9999 every logit above
-about 16 is a probability of exactly 1 in float32. `UNKNOWN` (255) is the mask value of a pixel
+about 16 is a probability of exactly 1 in float32. After the threshold, object specks under the
+model's ``min_object_px`` become background (`object_mask`, `edge.postprocess`); tune chooses
+thresholds on the pixels before that rule. `UNKNOWN` (255) is the mask value of a pixel
 without valid depth; `sigmoid` and `logit` are the one pair of conversions.
 
 Where the errors are (`boundary_band`, `BreakdownAccumulator`): most disagreement between a
@@ -38,7 +40,8 @@ sum to 1 and the TP share equals the pooled IoU, so the four error shares say ho
 IoU's shortfall from 1 divides up. The same band, as a void region excluded from scoring (the
 way PASCAL VOC ignores a 5 px band around its outlines), gives `depthseg-eval --ignore-boundary`.
 
-Numpy only (no torch, no cv2): used by the edge tools (tune, replay) as well as evaluation.
+Numpy, and OpenCV's connected components for the speck rule (no torch): used by the edge tools
+(tune, replay) as well as evaluation.
 """
 
 from __future__ import annotations
@@ -49,12 +52,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from edge.errors import ConfigError, DataError
+from edge.postprocess import remove_specks
 
 __all__ = [
     "UNKNOWN",
     "sigmoid",
     "logit",
     "segmentation_mask",
+    "object_mask",
     "Confusion",
     "FrameScores",
     "MetricSummary",
@@ -157,9 +162,24 @@ def predict_mask(logits: np.ndarray, threshold: float = 0.5) -> np.ndarray:
     return x >= t
 
 
-def segmentation_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5) -> np.ndarray:
-    """The uint8 mask a user sees: 1 object, 0 background (`predict_mask`), `UNKNOWN` where not ``valid``."""
-    mask = predict_mask(logits, threshold).view(np.uint8)
+def object_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5, min_object_px: int = 0) -> np.ndarray:
+    """Boolean object mask a model reports: `predict_mask` on valid pixels, specks removed.
+
+    Args:
+        logits: float H x W.
+        valid: bool H x W, pixels with a range; the others are never object.
+        threshold: the decision boundary (a probability).
+        min_object_px: object components (8-connected) with fewer pixels become background
+            (`edge.postprocess.remove_specks`; ``ModelMeta.min_object_px``); 0 keeps all.
+    """
+    return remove_specks(predict_mask(logits, threshold) & np.asarray(valid, dtype=bool), min_object_px)
+
+
+def segmentation_mask(
+    logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5, min_object_px: int = 0
+) -> np.ndarray:
+    """The uint8 mask a user sees: 1 object, 0 background (`object_mask`), `UNKNOWN` where not ``valid``."""
+    mask = object_mask(logits, valid, threshold, min_object_px).astype(np.uint8)
     mask[~np.asarray(valid, dtype=bool)] = UNKNOWN
     return mask
 

@@ -19,6 +19,10 @@ How, in constant memory (never a list of pixels or frames):
   histograms (pooled IoU). Cost per frame: one ``searchsorted`` over its valid pixels.
 - A pixel is object when ``logit >= edge``, exactly as `edge.metrics.predict_mask` decides
   with the stored probability ``sigmoid(edge)``.
+- The speck rule that follows the threshold (`edge.postprocess`, ``ModelMeta.min_object_px``)
+  is not in these scores: binned logits cannot see connected components. They are the numbers
+  ``depthseg-eval --min-object-px 0`` prints; with the rule eval's are equal or higher where
+  specks were false objects (on frames without objects, much higher).
 
 Objectives (all on per-frame means, i.e. the numbers ``depthseg-eval`` prints):
 ``iou`` mean IoU; ``f1`` / ``fBETA`` the F-score of mean precision and mean recall;
@@ -494,6 +498,7 @@ class TuneResult:
             "model": self.model,
             "labels": self.labels,
             "pseudo_labels": self.pseudo_labels,
+            "scores": "threshold rule alone, before the model's speck rule (depthseg-eval --min-object-px 0)",
         }
         d.update(self.extra)
         return d

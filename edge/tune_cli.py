@@ -79,7 +79,8 @@ def format_report(d: dict) -> str:
         f"tuning-frames {d['metric']} {d['tuning_value']:.4f}"
     )
     where = "in-sample (tuning frames, --split 0)" if d["in_sample"] else f"held-out frames ({d['heldout_frames']})"
-    lines.append(f"{where}: per-frame means")
+    lines.append(f"{where}: per-frame means of the threshold rule alone (before the model's speck rule; "
+                 "depthseg-eval --min-object-px 0 gives these)")
     lines.append(f"  {'':<16} {'threshold':<12} {'IoU':>7} {'precision':>9} {'recall':>7} {'F1':>7} {'pooled IoU':>10}")
     lines.append(_fmt_point("before (stored)", d["before"], d["metric"]))
     lines.append(_fmt_point("after (tuned)", d["after"], d["metric"]))

@@ -39,6 +39,7 @@ class ExportOptions:
     val_frames: int = 32
     threads: int = 2
     force: bool = False
+    min_object_px: int | None = None  # None = the checkpoint's speck rule (ModelMeta.min_object_px)
 
 
 def _split_encoder(name: str) -> tuple[str, bool]:
@@ -136,6 +137,8 @@ def export_model(opts: ExportOptions) -> dict[str, Any]:
 
     torch.set_num_threads(opts.threads)  # the reference forward passes: never more threads than asked
     model, meta, name = load_source(opts)
+    if opts.min_object_px is not None:
+        meta = meta.with_(min_object_px=opts.min_object_px)  # checked like any metadata (ModelError)
     source_channels = meta.in_channels
     if opts.single_channel:
         model, meta = to_single_channel(model, meta)

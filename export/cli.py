@@ -57,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calib-frames", type=int, default=32, help="frames for int8 calibration (default 32)")
     p.add_argument("--val-frames", type=int, default=32, help="labelled frames for the int8 IoU check (default 32)")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime threads for the checks (default 2)")
+    p.add_argument("--min-object-px", type=int, default=None, metavar="PX",
+                   help="store this speck rule in the exported model: object components under PX pixels become "
+                        "background (default: the checkpoint's, 6 px unless it says otherwise; 0 = off)")
     p.add_argument("--force", action="store_true", help="keep an int8 model even when it loses more than 0.5 IoU points")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     return p

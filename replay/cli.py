@@ -90,6 +90,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="topic prefix of the mask, mask_raw and overlay topics of --out and --serve (default /depthseg)")
     p.add_argument("--threshold", type=float, default=None,
                    help="object probability threshold (default: the one stored in the model)")
+    p.add_argument("--min-object-px", type=int, default=None, metavar="PX",
+                   help="object specks (8-connected) under PX pixels become background (default: the model's rule; "
+                        "0 keeps every object pixel)")
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (frames, fps, p50_ms, ... and iou, precision, recall, "
@@ -157,7 +160,7 @@ def _body(args: argparse.Namespace) -> int:
     )
     if args.out is not None:
         check_output_topics(stream.topics, args.out_namespace)
-    seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold)
+    seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold, min_object_px=args.min_object_px)
     _note(f"depth topic {stream.depth_topic} ({stream.depth_reason})")
     _note(f"labels: {stream.labels_topic or 'none (no scores)'}")
     s = seg.meta.sensor

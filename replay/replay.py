@@ -230,15 +230,16 @@ class ReplaySummary:
         return out
 
 
-def _mask_for(pred: _Prediction, threshold: float | None) -> np.ndarray:
+def _mask_for(pred: _Prediction, threshold: float | None, min_object_px: int = 0) -> np.ndarray:
     """The segmenter's mask, or (with a ``threshold`` of the caller's) the one threshold rule of
-    `edge.metrics` applied to its logits, so a replay at 0.9999 agrees with the Segmenter, eval and tune."""
+    `edge.metrics` applied to its logits, then the segmenter's speck rule, so a replay at 0.9999
+    agrees with the Segmenter, eval and tune."""
     if threshold is None:
         return np.asarray(pred.mask, dtype=np.uint8)
     logits = getattr(pred, "logits", None)
     if logits is None:
         logits = logit(np.asarray(pred.prob, dtype=np.float32))
-    return segmentation_mask(logits, pred.valid, threshold)
+    return segmentation_mask(logits, pred.valid, threshold, min_object_px)
 
 
 def replay(
@@ -327,7 +328,7 @@ def replay(
                 t0 = time.perf_counter()
                 pred = segmenter.predict(fr.depth)
                 ms = (time.perf_counter() - t0) * 1e3
-                mask = _mask_for(pred, over)
+                mask = _mask_for(pred, over, int(getattr(segmenter, "min_object_px", 0)))
                 lat.add(ms)
                 for k, v in (getattr(pred, "timings", None) or {}).items():
                     stage_sums[k] = stage_sums.get(k, 0.0) + float(v)

@@ -43,7 +43,7 @@ def time_torch(segs: Sequence[Segmenter], frames: Sequence[np.ndarray], runs: in
                 out = model(torch.from_numpy(pre.x[None])).numpy()
             t2 = time.perf_counter()
             h, w = pre.shape
-            segmentation_mask(out[0, 0, :h, :w], pre.valid, seg.threshold)
+            segmentation_mask(out[0, 0, :h, :w], pre.valid, seg.threshold, seg.min_object_px)
             t3 = time.perf_counter()
             return (t2 - t1) * 1e3, (t3 - t0) * 1e3
 

@@ -15,7 +15,7 @@ from edge.eval_cli import main as eval_main
 from edge.evaluate import COLORS, evaluate, render_figure
 from edge.io import Frame, FrameWriter, iter_frames
 from edge.meta import ModelMeta, fov_intrinsics
-from edge.metrics import MetricAccumulator, predict_mask
+from edge.metrics import MetricAccumulator, object_mask, predict_mask
 from edge.predict import Predictor, load_predictor
 
 H, W = 64, 96
@@ -100,13 +100,16 @@ def test_scores_come_from_the_model(tiny_ckpt, data):
     p = load_predictor(tiny_ckpt, threads=1)
     assert p.meta.threshold == 0.4 and p.name == str(tiny_ckpt)
     r = evaluate(p, iter_frames(data))
-    assert r.frames == 5 and r.threshold == 0.4
-    acc = MetricAccumulator()
+    assert r.frames == 5 and r.threshold == 0.4 and r.min_object_px == p.meta.min_object_px == 6
+    r0 = evaluate(p, iter_frames(data), min_object_px=0)  # the speck rule off: the bare threshold rule
+    acc, acc0 = MetricAccumulator(), MetricAccumulator()
     for fr in iter_frames(data):
         logits = p.logits(fr.depth)
         assert logits.shape == (H, W) and logits.dtype == np.float32
-        acc.add(predict_mask(logits, 0.4), fr.label, np.isfinite(fr.depth) & (fr.depth > 0))
-    assert r.metrics == acc.summary()
+        valid = np.isfinite(fr.depth) & (fr.depth > 0)
+        acc.add(object_mask(logits, valid, 0.4, 6), fr.label, valid)
+        acc0.add(predict_mask(logits, 0.4), fr.label, valid)
+    assert r.metrics == acc.summary() and r0.metrics == acc0.summary()
     r2 = evaluate(p, iter_frames(data), threshold=0.9, limit=2)
     assert r2.frames == 2 and r2.threshold == 0.9
 

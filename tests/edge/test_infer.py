@@ -8,6 +8,7 @@ from onnxgen import linear_model, raw_model
 
 from edge.errors import ConfigError, DataError, ModelError
 from edge.infer import UNKNOWN, Segmenter, sigmoid
+from edge.postprocess import remove_specks
 from edge.preprocess import preprocess, valid_mask
 from edge.sampleframes import synthetic_frames
 
@@ -36,6 +37,8 @@ def frames():
 def test_predict_gives_probability_mask_and_unknown_for_invalid_pixels(models, frames):
     seg = Segmenter(models["plain"], threads=1)
     assert seg.threshold == 0.4 and not seg.with_preprocessing and seg.precision == "fp32"
+    assert seg.min_object_px == 6
+    removed = 0
     for d in frames:
         p = seg.predict(d)
         valid = valid_mask(d)
@@ -43,11 +46,17 @@ def test_predict_gives_probability_mask_and_unknown_for_invalid_pixels(models, f
         assert 0.0 <= p.prob.min() and p.prob.max() <= 1.0
         np.testing.assert_array_equal(p.valid, valid)
         assert (p.mask[~valid] == UNKNOWN).all()
-        np.testing.assert_array_equal(p.mask[valid], (p.prob[valid] >= 0.4).astype(np.uint8))
+        # the threshold rule, then the speck rule (edge.postprocess) with the model's 6 px
+        expected = remove_specks((p.prob >= 0.4) & valid, seg.min_object_px)
+        removed += int((expected != ((p.prob >= 0.4) & valid)).sum())
+        np.testing.assert_array_equal(p.mask[valid], expected[valid].astype(np.uint8))
+        bare = Segmenter(models["plain"], threads=1, min_object_px=0).predict(d)
+        np.testing.assert_array_equal(bare.mask[valid], (p.prob[valid] >= 0.4).astype(np.uint8))
         assert 0 < p.mask[valid].mean() < 1  # both classes: the checks above are not vacuous
         np.testing.assert_allclose(p.prob, sigmoid(seg.logits(d)), atol=1e-6)
         assert set(p.timings) == {"pre", "infer", "post", "total"} and min(p.timings.values()) >= 0
         assert p.timings["total"] >= p.timings["infer"]
+    assert removed > 0  # the speck rule had specks to remove: the comparison above is not vacuous
 
 
 def test_logits_follow_edge_preprocess(models, frames):

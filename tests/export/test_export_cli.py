@@ -42,7 +42,20 @@ def test_checkpoint_to_single_channel_onnx(capsys, tmp_path):
     assert json.loads(props["training"]) == {"epochs": 2, "loss": "bce"}
     assert props["exported_from"] == "tiny" and props["single_channel"].startswith("True")
     seg = Segmenter(out, threads=1)
-    assert seg.threshold == 0.37 and seg.meta.in_channels == 1
+    assert seg.threshold == 0.37 and seg.meta.in_channels == 1 and seg.min_object_px == 6
+
+
+def test_export_stores_the_speck_rule_asked_for(capsys, tmp_path):
+    model, meta = tiny_model(3, in_channels=3)
+    ckpt = save_checkpoint(tmp_path / "tiny.pt", model, meta)
+    out = tmp_path / "tiny.onnx"
+    rc = main(["--model", str(ckpt), "--out", str(out), "--check-frames", "2", "--threads", "1", "--min-object-px", "0"])
+    assert rc == 0, capsys.readouterr().err
+    seg = Segmenter(out, threads=1)
+    assert seg.meta.min_object_px == 0 == seg.min_object_px and "under 0 px" in seg.props["postprocessing"]
+    rc = main(["--model", str(ckpt), "--out", str(tmp_path / "x.onnx"), "--min-object-px", "-2"])
+    _one_line_error(capsys, rc, "min_object_px")
+    assert not (tmp_path / "x.onnx").exists()
 
 
 def test_missing_checkpoint_is_one_line(capsys, tmp_path):
