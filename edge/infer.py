@@ -181,7 +181,7 @@ class Segmenter:
             raise ConfigError(f"threshold must lie in (0, 1), got {self.threshold}")
         self.min_object_px = self.meta.min_object_px if min_object_px is None else int(min_object_px)
         if self.min_object_px < 0:
-            raise ConfigError(f"min_object_px must be >= 0, got {self.min_object_px}")
+            raise ConfigError(f"`min_object_px` must be >= 0, got {self.min_object_px}")
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         if len(inputs) != 1:
             raise ModelError(f"{path}: expected one input '{INPUT_NAME}', found {[i.name for i in inputs]}")

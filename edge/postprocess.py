@@ -35,7 +35,7 @@ def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
         A bool mask; ``objects`` itself when nothing is removed (never modified in place).
     """
     if min_px < 0:
-        raise ConfigError(f"min_object_px must be >= 0, got {min_px}")
+        raise ConfigError(f"`min_object_px` must be >= 0, got {min_px}")
     objects = np.ascontiguousarray(objects, dtype=bool)
     if min_px <= 1 or objects.ndim != 2 or not objects.any():
         return objects
