@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Recipe of the shipped default model (edge/models/default.pt and default.onnx).
 #
-#   bash tools/train_default.sh            # ~58 min on 2 cores; measured: BENCHMARKS.md ("Issue 9: long objects (candidate v7) and a full-resolution skip (candidate v8)")
+#   bash tools/train_default.sh            # ~60 min on a quiet 2-core machine (75 min measured with other work beside it); BENCHMARKS.md ("Issue 9: candidate v9, 5 % long objects")
 #
 # 1. simulate 20,000 labelled frames (seed 1; 4 camera views of each of 5,000 settled scenes, which
 #    makes ~100 frames/s with 2 workers) with the pico flexx sensor model, wider domain
@@ -9,7 +9,8 @@
 #    noise level x0.7-3.5, 30 % white-noise frames as BlenSor's, dead-corner cone 31.5-38 deg, edges
 #    from crisp to the real sensor's (PSF 0-0.5 px, 3 % of flying pixels
 #    left by the filter), intrinsics from the datasheet to the real
-#    calibration, 20 % thin objects 3-8 mm, 20 % frames with a table edge, camera tilt +-15 deg),
+#    calibration, 20 % thin objects 3-8 mm, 20 % frames with a table edge, camera tilt +-15 deg,
+#    5 % long objects: handles, rods and sticks 12-30 cm lying across the scene),
 # 2. train a compact FCN-8s (VGG11 encoder with batch norm, width x0.125, extra pool2/pool1 skips
 #    and the full-resolution conv1 skip,
 #    depth replicated to 3 channels as in the paper plus a height-above-dominant-plane channel,
@@ -20,8 +21,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=.venv/bin
-DATA=${DATA:-data/train_v5}
-RUN=${RUN:-runs/v8}
+DATA=${DATA:-data/train_v9}
+RUN=${RUN:-runs/v9}
 FRAMES=${FRAMES:-20000}
 EPOCHS=${EPOCHS:-11}
 MINUTES=${MINUTES:-55}
