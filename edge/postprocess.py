@@ -43,8 +43,21 @@ def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
     # at most one 8-connected component per 2 x 2 block: 16-bit labels while they fit
     ltype = cv2.CV_16U if ((h + 1) // 2) * ((w + 1) // 2) < 65535 else cv2.CV_32S
     n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=ltype)
-    small = np.bincount(labels.ravel(), minlength=n) < min_px
-    small[0] = False  # label 0 is the background
+    if n <= 1:
+        return objects
+    if n <= 256:
+        # the usual frame (a few dozen components): 8-bit labels, OpenCV's histogram and lookup
+        # table; half the time of the general path below, and this runs on every frame
+        l8 = labels.astype(np.uint8)
+        small = cv2.calcHist([l8], [0], None, [256], [0, 256]).ravel()[:n] < min_px
+        small[0] = False  # label 0 is the background
+        if not small.any():
+            return objects
+        lut = np.zeros(256, np.uint8)
+        lut[1:n] = ~small[1:n]
+        return cv2.LUT(l8, lut).view(bool)
+    small = np.bincount(labels[objects], minlength=n) < min_px
+    small[0] = False
     if not small.any():
         return objects
     return objects & ~small[labels]

@@ -72,3 +72,19 @@ def test_metadata_carries_the_rule() -> None:
     for bad in (-1, 1.5, True, "6", 10**9):
         with pytest.raises(ModelError, match="min_object_px"):
             ModelMeta(min_object_px=bad)
+
+
+def test_both_paths_agree_with_a_plain_labelling() -> None:
+    # few components (8-bit lookup path) and many (general path) against scipy-free plain numpy
+    import cv2
+
+    rng = np.random.default_rng(3)
+    for t in range(300):
+        h, w = rng.integers(1, 120, 2)
+        m = rng.random((h, w)) < rng.uniform(0.0, 0.7)
+        n, lab = cv2.connectedComponents(m.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        area = np.bincount(lab.ravel(), minlength=n)
+        for k in (2, 6, 15):
+            keep = area >= k
+            keep[0] = False
+            np.testing.assert_array_equal(remove_specks(m, k), keep[lab], err_msg=f"case {t}, min_px {k}")
