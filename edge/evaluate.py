@@ -45,6 +45,7 @@ from edge.metrics import (
     object_mask,
     threshold_logit,
 )
+from edge.postprocess import check_min_px
 from edge.preprocess import standardize, valid_mask
 
 __all__ = ["EvalReport", "evaluate", "render_figure", "COLORS", "model_label"]
@@ -242,9 +243,8 @@ def evaluate(
         threshold = float(meta.threshold) if meta is not None else 0.5
     threshold_logit(threshold)  # checks it lies in (0, 1) before any frame is run
     if min_object_px is None:
-        min_object_px = int(meta.min_object_px) if meta is not None else 0
-    if min_object_px < 0:
-        raise ConfigError(f"`min_object_px` must be >= 0, got {min_object_px}")
+        min_object_px = meta.min_object_px if meta is not None else 0
+    min_object_px = check_min_px(min_object_px)  # before any frame is run
     if figure_pick not in FIGURE_PICKS:
         raise ConfigError(f"unknown figure pick '{figure_pick}'; choose from {', '.join(FIGURE_PICKS)}")
     if max_figures < 0:
@@ -312,7 +312,7 @@ def evaluate(
     return EvalReport(
         model=getattr(predictor, "name", "model"),
         threshold=float(threshold),
-        min_object_px=int(min_object_px),
+        min_object_px=min_object_px,
         metrics=acc.plain.summary(),
         baseline=bacc.plain.summary() if bacc is not None else None,
         baseline_params=asdict(base) if base is not None else None,

@@ -30,6 +30,7 @@ from edge.errors import ConfigError, DataError, ModelError
 from edge.io.paths import check_input_file
 from edge.meta import ModelMeta
 from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
+from edge.postprocess import check_min_px
 from edge.preprocess import preprocess_batch_for, preprocess_for, valid_for
 
 __all__ = [
@@ -189,9 +190,7 @@ class Segmenter:
         self.threshold = self.meta.threshold if threshold is None else float(threshold)
         if not 0.0 < self.threshold < 1.0:
             raise ConfigError(f"threshold must lie in (0, 1), got {self.threshold}")
-        self.min_object_px = self.meta.min_object_px if min_object_px is None else int(min_object_px)
-        if self.min_object_px < 0:
-            raise ConfigError(f"`min_object_px` must be >= 0, got {self.min_object_px}")
+        self.min_object_px = check_min_px(self.meta.min_object_px if min_object_px is None else min_object_px)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         if len(inputs) != 1:
             raise ModelError(f"{path}: expected one input '{INPUT_NAME}', found {[i.name for i in inputs]}")

@@ -21,7 +21,18 @@ import numpy as np
 
 from edge.errors import ConfigError
 
-__all__ = ["remove_specks"]
+__all__ = ["check_min_px", "remove_specks"]
+
+
+def check_min_px(min_px: int) -> int:
+    """``min_px`` as an int if it is a usable speck size (>= 0; 0 and 1 keep every pixel).
+
+    One check for every caller (`Segmenter`, `edge.evaluate`, `remove_specks`), so a bad value
+    fails with the same one line before any frame is run.
+    """
+    if int(min_px) < 0:
+        raise ConfigError(f"`min_object_px` must be >= 0, got {min_px}")
+    return int(min_px)
 
 
 def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
@@ -34,8 +45,7 @@ def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
     Returns:
         A bool mask; ``objects`` itself when nothing is removed (never modified in place).
     """
-    if min_px < 0:
-        raise ConfigError(f"`min_object_px` must be >= 0, got {min_px}")
+    min_px = check_min_px(min_px)
     objects = np.ascontiguousarray(objects, dtype=bool)
     if min_px <= 1 or objects.ndim != 2 or not objects.any():
         return objects

@@ -146,3 +146,8 @@ def test_segmenter_marks_objects_and_unknown_in_both_graph_kinds(models, frames)
     raw = Segmenter(models["raw"], threads=1).predict(frames[0])
     invalid = int((~valid_mask(frames[0])).sum())
     assert int((p.mask == 1).sum()) > 0 and int((p.mask == 255).sum()) == invalid == int((raw.mask == 255).sum())
+
+
+def test_a_negative_speck_size_is_refused_before_any_frame(models):
+    with pytest.raises(ConfigError, match="min_object_px"):
+        Segmenter(models["plain"], threads=1, min_object_px=-1)
