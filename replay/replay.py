@@ -68,6 +68,7 @@ class _Prediction(Protocol):
 
 class _Segmenter(Protocol):
     threshold: float
+    min_object_px: int  # the speck rule of its masks (edge.postprocess); a threshold override keeps it
 
     def predict(self, depth: np.ndarray) -> _Prediction: ...
 
@@ -230,7 +231,7 @@ class ReplaySummary:
         return out
 
 
-def _mask_for(pred: _Prediction, threshold: float | None, min_object_px: int = 0) -> np.ndarray:
+def _mask_for(pred: _Prediction, threshold: float | None, min_object_px: int) -> np.ndarray:
     """The segmenter's mask, or (with a ``threshold`` of the caller's) the one threshold rule of
     `edge.metrics` applied to its logits, then the segmenter's speck rule, so a replay at 0.9999
     agrees with the Segmenter, eval and tune."""
@@ -328,7 +329,7 @@ def replay(
                 t0 = time.perf_counter()
                 pred = segmenter.predict(fr.depth)
                 ms = (time.perf_counter() - t0) * 1e3
-                mask = _mask_for(pred, over, int(getattr(segmenter, "min_object_px", 0)))
+                mask = _mask_for(pred, over, segmenter.min_object_px)
                 lat.add(ms)
                 for k, v in (getattr(pred, "timings", None) or {}).items():
                     stage_sums[k] = stage_sums.get(k, 0.0) + float(v)

@@ -281,6 +281,7 @@ class FakeSegmenter:
     def __init__(self, cut: float = 0.275, threshold: float = 0.5, invert: bool = False) -> None:
         self.cut = cut
         self.threshold = threshold
+        self.min_object_px = 0  # its masks are the bare threshold rule
         self.invert = invert
         self.calls = 0
 

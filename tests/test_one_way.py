@@ -33,6 +33,7 @@ class FixedLogits:
         self.meta = ModelMeta(encoder="vgg11", width=0.125, in_channels=1, threshold=threshold, min_object_px=0)
         self.name = "fixed"
         self.threshold = threshold
+        self.min_object_px = 0
 
     def logits(self, depth: np.ndarray) -> np.ndarray:
         return self._logits
