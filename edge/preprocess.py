@@ -34,7 +34,6 @@ __all__ = [
     "valid_for",
     "standardize",
     "padded_shape",
-    "pad",
     "preprocess",
     "preprocess_batch",
     "preprocess_for",
@@ -138,16 +137,6 @@ def padded_shape(height: int, width: int, multiple: int = 32) -> tuple[int, int]
     return (-(-height // multiple) * multiple, -(-width // multiple) * multiple)
 
 
-def pad(x: np.ndarray, multiple: int = 32) -> np.ndarray:
-    """Zero-pad the last two axes at the bottom/right to multiples of ``multiple``."""
-    h, w = x.shape[-2:]
-    hp, wp = padded_shape(h, w, multiple)
-    if (hp, wp) == (h, w):
-        return x
-    widths = [(0, 0)] * (x.ndim - 2) + [(0, hp - h), (0, wp - w)]
-    return np.pad(x, widths)
-
-
 def preprocess(
     depth: np.ndarray,
     channels: int = 1,
@@ -187,20 +176,20 @@ def preprocess(
     return Preprocessed(x=x, valid=valid, mean=mean, std=std)
 
 
+def _options(meta) -> dict:
+    """Everything a model's `edge.meta.ModelMeta` says about its input, as `preprocess` arguments."""
+    return {"channels": meta.in_channels, "multiple": meta.pad_multiple, "standardize_mode": meta.standardize,
+            "cues": tuple(meta.cues), "max_range_m": meta.sensor.max_range_m}
+
+
 def preprocess_for(depth: np.ndarray, meta) -> Preprocessed:
     """`preprocess` with everything a model's `edge.meta.ModelMeta` says about its input."""
-    return preprocess(
-        depth, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues),
-        max_range_m=meta.sensor.max_range_m,
-    )
+    return preprocess(depth, **_options(meta))
 
 
 def preprocess_batch_for(frames: list[np.ndarray], meta) -> tuple[np.ndarray, np.ndarray]:
     """`preprocess_batch` with everything a model's `edge.meta.ModelMeta` says about its input."""
-    return preprocess_batch(
-        frames, meta.in_channels, meta.pad_multiple, standardize_mode=meta.standardize, cues=tuple(meta.cues),
-        max_range_m=meta.sensor.max_range_m,
-    )
+    return preprocess_batch(frames, **_options(meta))
 
 
 def preprocess_batch(

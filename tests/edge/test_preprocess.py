@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from edge.errors import DataError
-from edge.preprocess import pad, padded_shape, preprocess, preprocess_batch, standardize, valid_mask
+from edge.preprocess import padded_shape, preprocess, preprocess_batch, standardize, valid_mask
 
 
 def frame(h=171, w=224, seed=0):
@@ -77,8 +77,8 @@ def test_padding_to_192x224_is_zero_at_bottom_right():
     q = preprocess(frame(40, 50), channels=1)
     assert q.x.shape == (1, 64, 64)
     assert np.all(q.x[:, 40:, :] == 0) and np.all(q.x[:, :, 50:] == 0)
-    x = np.ones((2, 3, 5), np.float32)
-    assert pad(x, 4).shape == (2, 4, 8) and pad(x, 4)[:, :3, :5].sum() == 30
+    r = preprocess(frame(12, 20), channels=3, multiple=8)  # another multiple: the frame sits top-left
+    assert r.x.shape == (3, 16, 24) and not r.x[:, 12:, :].any() and not r.x[:, :, 20:].any()
 
 
 def test_all_invalid_frame_gives_zeros():
