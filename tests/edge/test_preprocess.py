@@ -77,8 +77,8 @@ def test_padding_to_192x224_is_zero_at_bottom_right():
     q = preprocess(frame(40, 50), channels=1)
     assert q.x.shape == (1, 64, 64)
     assert np.all(q.x[:, 40:, :] == 0) and np.all(q.x[:, :, 50:] == 0)
-    r = preprocess(frame(12, 20), channels=3, multiple=8)  # another multiple: the frame sits top-left
-    assert r.x.shape == (3, 16, 24) and not r.x[:, 12:, :].any() and not r.x[:, :, 20:].any()
+    r = preprocess(frame(30, 20), channels=3, multiple=8)  # another multiple: the frame sits top-left
+    assert r.x.shape == (3, 32, 24) and not r.x[:, 30:, :].any() and not r.x[:, :, 20:].any()
 
 
 def test_all_invalid_frame_gives_zeros():
