@@ -37,6 +37,7 @@ from edge.infer import Segmenter
 
 __all__ = [
     "DEFAULT_BLOCK",
+    "check_block",
     "ModelSpec",
     "cpu_info",
     "runtime_info",
@@ -46,6 +47,16 @@ __all__ = [
 ]
 
 DEFAULT_BLOCK = 10  # consecutive timed frames of one model per turn (module docstring)
+
+
+def check_block(block: int | None) -> int:
+    """The turn length to use: ``DEFAULT_BLOCK`` for None, else ``block`` if >= 1 (one check for
+    `bench_models` and `export.benchmark.benchmark`, which asks before its slow exports)."""
+    block = DEFAULT_BLOCK if block is None else int(block)
+    if block < 1:
+        raise ConfigError(f"`block` must be >= 1, got {block}")
+    return block
+
 
 ISA_FLAGS = (
     "sse4_2", "avx", "avx2", "fma", "f16c", "avx512f", "avx512bw", "avx512vl", "avx512_vnni", "avx_vnni",
@@ -164,8 +175,7 @@ def bench_models(
         raise ConfigError("no model to benchmark")
     if runs < 1 or warmup < 0:
         raise ConfigError(f"need runs >= 1 and warmup >= 0, got runs={runs}, warmup={warmup}")
-    if block < 1:
-        raise ConfigError(f"`block` must be >= 1, got {block}")
+    block = check_block(block)
     if not frames:
         raise ConfigError("no frame to benchmark on")
     entries = []

@@ -71,7 +71,7 @@ def benchmark(
         ConfigError: threads or frames below 1, or a bad ``compare`` item.
         ModelError: a model file is missing or unreadable.
     """
-    from edge.bench import DEFAULT_BLOCK, ModelSpec, bench_models, cpu_info, peak_rss_mb, runtime_info
+    from edge.bench import ModelSpec, bench_models, check_block, cpu_info, peak_rss_mb, runtime_info
     from edge.cliutil import require
     from edge.defaults import resolve_model
     from edge.io.paths import check_input_file
@@ -82,9 +82,7 @@ def benchmark(
         raise ConfigError(f"`threads` must be distinct counts >= 1, got {threads}")
     if frames < 1:
         raise ConfigError(f"`frames` must be >= 1, got {frames}")
-    block = DEFAULT_BLOCK if block is None else int(block)
-    if block < 1:
-        raise ConfigError(f"`block` must be >= 1, got {block}")
+    block = check_block(block)  # before the exports of `compare`, which take seconds
     archs = [parse_compare(c) for c in compare]
     for m in models or ():
         check_input_file(m, "model")  # a FIFO would block onnxruntime's read forever
