@@ -230,12 +230,15 @@ def train(
                 raise ConfigError(
                     f"`resume`: {k}={getattr(meta, k)!r} contradicts the checkpoint's {getattr(saved, k)!r}"
                 )
+        if (avg is not None) != ("weight_average" in blob):
+            raise ConfigError(
+                f"`resume`: ema={cfg.ema} contradicts the checkpoint, which was trained "
+                f"{'with' if 'weight_average' in blob else 'without'} a weight average; resume with the run's `ema`"
+            )
         try:
             model.load_state_dict(blob["state_dict"])
             opt.load_state_dict(blob["optimizer"])
             if avg is not None:
-                if "weight_average" not in blob:
-                    raise ValueError("the run was started without a weight average (`ema`)")
                 avg.load(blob["weight_average"])
             old = blob.get("epoch_base") != 1  # checkpoints before epochs were numbered from 1
             if isinstance(blob["epoch"], bool) or not isinstance(blob["epoch"], int) or not 0 <= blob["epoch"] < 10**6:
@@ -259,6 +262,8 @@ def train(
 
     dist = Dist.from_env()  # torchrun: DDP across ranks (edge.train.distributed); one process: no-op
     net = dist.wrap(model)
+    if avg is not None:
+        avg.model.to(dist.device)  # beside the model on its device (CUDA under torchrun)
     if dist.enabled:
         training_info = dict(training_info or {}, ddp_world_size=dist.world)
     t0 = time.time()

@@ -146,22 +146,29 @@ def test_a_checkpoint_that_would_run_code_is_refused_and_runs_nothing(tmp_path) 
 def test_weight_average_is_what_is_validated_kept_and_resumed(tmp_path) -> None:
     fs = _frames(16)
     tr, va = fs.subset(np.arange(12)), fs.subset(np.arange(12, 16))
-    cfg = TrainConfig(epochs=2, batch_size=4, lr=1e-2, seed=0, threads=1, ema=0.9)
-    res = train(META, tr, va, tmp_path, cfg)
-    last = read_checkpoint(tmp_path / "last.pt")
+    cfg = TrainConfig(epochs=1, batch_size=4, lr=1e-2, seed=0, threads=1, ema=0.9)
+    train(META, tr, va, tmp_path, cfg)
+    last, best = read_checkpoint(tmp_path / "last.pt"), read_checkpoint(tmp_path / "best.pt")
     avg = last["weight_average"]
-    assert avg["updates"] == 2 * 3  # one update per step: 12 frames / batch 4, two epochs
-    best = read_checkpoint(tmp_path / "best.pt")
-    name = next(k for k, v in last["state_dict"].items() if v.dtype.is_floating_point and v.ndim == 4)
-    if res.best_epoch == 2:  # best.pt holds the average, not the last step's weights
-        assert torch.equal(best["state_dict"][name], avg["state_dict"][name])
-    assert not torch.equal(avg["state_dict"][name], last["state_dict"][name])
-    res = train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=4, lr=1e-2, seed=0, threads=1, ema=0.9),
-                resume=True)
+    assert avg["updates"] == 3  # one update per step: 12 frames / batch 4
+    conv = [k for k, v in last["state_dict"].items() if v.dtype.is_floating_point and v.ndim == 4]
+    # best.pt (epoch 1, always an improvement) holds the average, last.pt the last step's weights
+    assert all(torch.equal(best["state_dict"][k], avg["state_dict"][k]) for k in conv)
+    assert not all(torch.equal(avg["state_dict"][k], last["state_dict"][k]) for k in conv)
+    train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=4, lr=1e-2, seed=0, threads=1, ema=0.9),
+          resume=True)
     assert read_checkpoint(tmp_path / "last.pt")["weight_average"]["updates"] == 3 * 3
-    with pytest.raises(ModelError, match="weight average"):
-        train(META, tr, va, tmp_path / "plain", TrainConfig(epochs=1, batch_size=4, threads=1))
+
+
+def test_resume_must_keep_the_runs_weight_average_setting(tmp_path) -> None:
+    fs = _frames(8)
+    tr, va = fs.subset(np.arange(6)), fs.subset(np.arange(6, 8))
+    train(META, tr, va, tmp_path / "plain", TrainConfig(epochs=1, batch_size=4, threads=1))
+    with pytest.raises(ConfigError, match="without a weight average"):
         train(META, tr, va, tmp_path / "plain", TrainConfig(epochs=2, batch_size=4, threads=1, ema=0.9), resume=True)
+    train(META, tr, va, tmp_path / "avg", TrainConfig(epochs=1, batch_size=4, threads=1, ema=0.9))
+    with pytest.raises(ConfigError, match="with a weight average"):
+        train(META, tr, va, tmp_path / "avg", TrainConfig(epochs=2, batch_size=4, threads=1), resume=True)
 
 
 def test_weight_average_decay_must_be_below_one() -> None:
