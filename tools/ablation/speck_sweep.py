@@ -3,8 +3,8 @@
 
 The speck rule (`edge.postprocess`): after the threshold, object components (8-connected) under
 ``min_object_px`` pixels become background. One inference per frame; every size is scored on
-the same logits. Held-out simulated sets only (the README results table's); never the BlenSor
-or real frames.
+the same logits. Held-out simulated sets only (`heldout.HELD_OUT`, the README results table's);
+never the BlenSor or real frames.
 
     .venv/bin/python tools/ablation/speck_sweep.py [MODEL.onnx] [--sizes 0 2 3 4 6 8 12 16]
 """
@@ -12,20 +12,11 @@ or real frames.
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
 
-import numpy as np
+from heldout import sweep
 
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT))
-
-from edge.infer import Segmenter, checked_logits  # noqa: E402
-from edge.io import open_frames  # noqa: E402
-from edge.metrics import confusion, frame_scores, object_mask  # noqa: E402
-from edge.preprocess import valid_mask  # noqa: E402
-
-SETS = ["default", "crisp", "blurred", "thin", "table_edge", "tilted", "curved", "tray", "stacked", "long"]
+from edge.infer import Segmenter
+from edge.metrics import object_mask
 
 
 def main() -> int:
@@ -36,31 +27,11 @@ def main() -> int:
     seg = Segmenter(args.model, threads=2)
     print(f"model {seg.name}, threshold {seg.threshold:g}; mean IoU over frames (%) with object specks "
           "under N px removed")
-    print("| held-out set | " + " | ".join(f"N={k}" for k in args.sizes) + " |")
-    print("|---|" + "---:|" * len(args.sizes))
-    means: list[list[float]] = []
-    for name in SETS:
-        path = ROOT / "data" / f"test_{name}"
-        if not path.exists():
-            print(f"| {name} | missing: simulate it with tools/results_table.py --make-data |")
-            continue
-        frames, _ = open_frames(path, require_labels=True)
-        per: list[list[float]] = [[] for _ in args.sizes]
-        for fr in frames:
-            d, lab = np.asarray(fr.depth), np.asarray(fr.label)
-            valid = valid_mask(d)
-            logits = checked_logits(seg, d)
-            for i, k in enumerate(args.sizes):
-                s = frame_scores(confusion(object_mask(logits, valid, seg.threshold, k), lab, valid))
-                if s is not None:
-                    per[i].append(s.iou)
-        row = [100 * float(np.mean(p)) for p in per]
-        means.append(row)
-        print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in row) + " |", flush=True)
-    if means:
-        col = np.mean(np.asarray(means), axis=0)
-        print(f"| mean of {len(means)} sets | " + " | ".join(f"{v:.2f}" for v in col) + " |")
-    return 0
+
+    def size(k: int):
+        return lambda logits, valid, _depth: object_mask(logits, valid, seg.threshold, k)
+
+    return sweep(seg, [f"N={k}" for k in args.sizes], [size(k) for k in args.sizes])
 
 
 if __name__ == "__main__":
