@@ -70,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--ema", type=float, default=0.0, metavar="DECAY",
                    help="validate and keep an exponential moving average of the weights with this decay per step "
                    "(e.g. 0.999, ~1,000 steps; default 0 = the last step's weights)")
+    t.add_argument("--jaccard", type=float, default=0.0, metavar="WEIGHT",
+                   help="add WEIGHT x (1 - soft IoU of the object class, per frame) to the masked BCE, towards "
+                   "the per-frame IoU that eval reports (e.g. 0.5; default 0 = BCE alone)")
     t.add_argument("--patience", type=int, default=10, help="stop after this many epochs without a better val loss")
     t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
     t.add_argument("--no-augment", action="store_true", help="disable flips")
@@ -128,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
-            ema=args.ema,
+            ema=args.ema, jaccard=args.jaccard,
         )
         from edge.train.encoders import list_encoders
 

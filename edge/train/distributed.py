@@ -12,6 +12,8 @@ What stays the same as one process, and why:
   its pixel-loss sum by the all-reduced pixel count (times N, since DDP averages gradients), so
   the gradient equals the one-process gradient up to float rounding and batch-norm statistics
   (computed per rank over its slice; running statistics are broadcast from rank 0).
+- The optional soft Jaccard term (``--jaccard``) is a mean over the frames of the global batch:
+  each rank scales its frames' sum by N over the all-reduced frame count.
 - Validation is split across ranks and its sums all-reduced: every rank sees the same loss, so
   early stopping, patience and the "best" choice agree on all ranks.
 - Rank 0 alone writes checkpoints, ``log.csv``, ``loss.png`` and prints; ``--resume`` makes every
@@ -26,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["Dist", "env_world", "is_main_process"]
+__all__ = ["Dist", "env_world", "is_main_process", "soft_jaccard"]
 
 
 def env_world() -> tuple[int, int, int]:
@@ -36,6 +38,28 @@ def env_world() -> tuple[int, int, int]:
 
 def is_main_process() -> bool:
     return env_world()[0] == 0
+
+
+def soft_jaccard(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, smooth: float = 1.0) -> torch.Tensor:
+    """Per-frame ``1 - soft IoU`` of the object class over the valid pixels, shape [B].
+
+    Why: the score users read is the per-frame IoU (the paper's), where a small object's 2 px
+    halo or a few stray pixels on an empty table cost as much as a large object's whole outline;
+    masked BCE weighs every pixel alike, so large objects and the table dominate it. ``smooth``
+    (in pixels) keeps empty frames defined: there the term is ``s / (s + smooth)`` for ``s``
+    object probability summed over the frame, i.e. stray object pixels are punished.
+
+    Args:
+        logits: [B, 1, H, W] raw scores.
+        target: [B, 1, H, W] 1 = object.
+        mask: [B, 1, H, W] 1 = valid, unpadded pixel (the rest never counts).
+        smooth: added to intersection and union.
+    """
+    p = torch.sigmoid(logits) * mask
+    t = target * mask
+    inter = (p * t).sum(dim=(1, 2, 3))
+    union = (p + t).sum(dim=(1, 2, 3)) - inter
+    return 1.0 - (inter + smooth) / (union + smooth)
 
 
 @dataclass
@@ -85,16 +109,28 @@ class Dist:
         """This rank's slice ``[rank::world]`` of a global batch, as tensors on its device."""
         return tuple(torch.from_numpy(np.ascontiguousarray(a[self.rank :: self.world])).to(self.device) for a in arrays)
 
-    def loss(self, logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, float]:
-        """(loss to back-propagate, masked BCE of the global batch for the log)."""
+    def loss(self, logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor,
+             jaccard: float = 0.0) -> tuple[torch.Tensor, float]:
+        """(loss to back-propagate, masked BCE of the global batch for the log).
+
+        Args:
+            logits, target, mask: this rank's slice of the batch, [b, 1, H, W] each.
+            jaccard: weight of the per-frame soft Jaccard term (`soft_jaccard`), averaged over the
+                frames of the global batch; 0 = masked BCE alone.
+        """
         pix = torch.nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none")
         local_sum, local_n = (pix * mask).sum(), mask.sum()
+        jac = soft_jaccard(logits, target, mask).sum() if jaccard > 0 else None
         if not self.enabled:
-            loss = local_sum / local_n.clamp_min(1.0)
-            return loss, float(loss.detach())
-        s = self.all_sum([float(local_sum.detach()), float(local_n)])
+            bce = local_sum / local_n.clamp_min(1.0)
+            loss = bce if jac is None else bce + jaccard * jac / max(logits.shape[0], 1)
+            return loss, float(bce.detach())
+        s = self.all_sum([float(local_sum.detach()), float(local_n), float(logits.shape[0])])
         n = max(s[1], 1.0)
-        return local_sum * (self.world / n), s[0] / n
+        loss = local_sum * (self.world / n)
+        if jac is not None:
+            loss = loss + jaccard * jac * (self.world / max(s[2], 1.0))
+        return loss, s[0] / n
 
     def all_sum(self, values: list[float]) -> list[float]:
         """Element-wise sum over ranks (float64; identity with one process)."""

@@ -10,6 +10,7 @@ from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
 from edge.train.data import FrameSet, make_batch, split_indices
+from edge.train.distributed import soft_jaccard
 from edge.train.loop import TrainConfig, masked_bce, train
 from edge.train_cli import main as train_main
 
@@ -102,6 +103,8 @@ def test_split_is_deterministic_and_disjoint() -> None:
         (["--data", "x", "--out", "OUT", "--split", "0.5,0.5"], "--split"),
         (["--data", "x", "--out", "OUT", "--epochs", "0"], "epochs"),
         (["--data", "x", "--out", "OUT", "--encoder", "resnet"], "unknown encoder"),
+        (["--data", "x", "--out", "OUT", "--jaccard", "-1"], "jaccard weight"),
+        (["--data", "x", "--out", "OUT", "--jaccard", "nan"], "jaccard weight"),
     ],
 )
 def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) -> None:
@@ -174,3 +177,31 @@ def test_resume_must_keep_the_runs_weight_average_setting(tmp_path) -> None:
 def test_weight_average_decay_must_be_below_one() -> None:
     with pytest.raises(ConfigError, match="ema decay"):
         TrainConfig(ema=1.0)
+
+
+def test_soft_jaccard_is_per_frame_and_ignores_masked_pixels() -> None:
+    target = torch.zeros(3, 1, 4, 4)
+    target[0, 0, :2, :2] = 1  # frame 0: a 4 px object; frames 1 and 2: empty tables
+    logits = torch.where(target > 0, 20.0, -20.0)
+    logits[1, 0, 0, :2] = 20.0  # frame 1: two stray object pixels on an empty table
+    mask = torch.ones_like(target)
+    j = soft_jaccard(logits, target, mask)
+    assert j.shape == (3,)
+    assert float(j[0]) < 1e-6 and float(j[2]) < 1e-6  # right answers cost nothing
+    assert abs(float(j[1]) - 2 / 3) < 1e-4  # 1 - smooth / (2 stray + smooth)
+    mask[1, 0, 0, :2] = 0  # the stray pixels are invalid: they never count
+    assert float(soft_jaccard(logits, target, mask)[1]) < 1e-6
+
+
+def test_jaccard_term_trains_and_is_recorded_while_the_logged_loss_stays_bce(tmp_path) -> None:
+    fs = _frames(16)
+    tr, va = fs.subset(np.arange(12)), fs.subset(np.arange(12, 16))
+    base = dict(epochs=2, batch_size=4, lr=1e-2, seed=0, threads=1)
+    plain = train(META, tr, va, tmp_path / "plain", TrainConfig(**base))
+    jac = train(META, tr, va, tmp_path / "jac", TrainConfig(**base, jaccard=0.5))
+    # the first logged batch loss is the same masked BCE of the same weights, with or without the term
+    b0 = [read_checkpoint(r / "last.pt")["batch_losses"][0] for r in (tmp_path / "plain", tmp_path / "jac")]
+    assert b0[0] == pytest.approx(b0[1], rel=1e-6)
+    # ...but the term changes the gradient, so the weights part after the first step
+    assert plain.history[-1]["train_loss"] != jac.history[-1]["train_loss"]
+    assert read_checkpoint(tmp_path / "jac" / "best.pt")["meta"]["training"]["config"]["jaccard"] == 0.5

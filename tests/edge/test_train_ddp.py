@@ -44,10 +44,11 @@ def _log(run: Path) -> list[dict[str, float]]:
 
 
 @pytest.mark.slow
-def test_two_process_torchrun_matches_one_process_and_resumes(tmp_path):
+@pytest.mark.parametrize("loss", [[], ["--jaccard", "0.5"]], ids=["bce", "bce+jaccard"])
+def test_two_process_torchrun_matches_one_process_and_resumes(tmp_path, loss):
     _write(tmp_path / "train.mcap", 16, 0)
     _write(tmp_path / "val.mcap", 8, 1)
-    data = ["--train-dir", str(tmp_path / "train.mcap"), "--val-dir", str(tmp_path / "val.mcap")]
+    data = ["--train-dir", str(tmp_path / "train.mcap"), "--val-dir", str(tmp_path / "val.mcap"), *loss]
     one, two = tmp_path / "one", tmp_path / "two"
     _run([sys.executable, "-m", "edge.train_cli", *data, *ARGS, "--epochs", "2", "--out", str(one)])
     _run([*_torchrun(2), *data, *ARGS, "--epochs", "2", "--out", str(two)])
