@@ -28,7 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["Dist", "env_world", "is_main_process", "soft_jaccard"]
+from edge.train.losses import soft_jaccard
+
+__all__ = ["Dist", "env_world", "is_main_process"]
 
 
 def env_world() -> tuple[int, int, int]:
@@ -38,28 +40,6 @@ def env_world() -> tuple[int, int, int]:
 
 def is_main_process() -> bool:
     return env_world()[0] == 0
-
-
-def soft_jaccard(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor, smooth: float = 1.0) -> torch.Tensor:
-    """Per-frame ``1 - soft IoU`` of the object class over the valid pixels, shape [B].
-
-    Why: the score users read is the per-frame IoU (the paper's), where a small object's 2 px
-    halo or a few stray pixels on an empty table cost as much as a large object's whole outline;
-    masked BCE weighs every pixel alike, so large objects and the table dominate it. ``smooth``
-    (in pixels) keeps empty frames defined: there the term is ``s / (s + smooth)`` for ``s``
-    object probability summed over the frame, i.e. stray object pixels are punished.
-
-    Args:
-        logits: [B, 1, H, W] raw scores.
-        target: [B, 1, H, W] 1 = object.
-        mask: [B, 1, H, W] 1 = valid, unpadded pixel (the rest never counts).
-        smooth: added to intersection and union.
-    """
-    p = torch.sigmoid(logits) * mask
-    t = target * mask
-    inter = (p * t).sum(dim=(1, 2, 3))
-    union = (p + t).sum(dim=(1, 2, 3)) - inter
-    return 1.0 - (inter + smooth) / (union + smooth)
 
 
 @dataclass

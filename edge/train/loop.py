@@ -13,7 +13,7 @@ Differences from the paper, and why:
   in flatter minima, and averaging is the cheapest known lever for domain generalisation (SWAD,
   Cha et al. 2021); the learned model's weakness is data it never saw (issue 9). No extra passes.
 - ``jaccard`` (optional): adds that weight times the per-frame soft Jaccard loss
-  (`edge.train.distributed.soft_jaccard`) to the masked BCE, so training pulls towards the
+  (`edge.train.losses.soft_jaccard`) to the masked BCE, so training pulls towards the
   per-frame IoU users read. Validation loss, early stopping and the logged train loss stay
   masked BCE, comparable across runs with and without it.
 """
@@ -40,6 +40,7 @@ from edge.meta import ModelMeta
 from edge.train.checkpoint import checkpoint_meta, read_checkpoint, save_checkpoint
 from edge.train.data import FrameSet, make_batch
 from edge.train.distributed import Dist
+from edge.train.losses import masked_bce
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
 
 __all__ = ["TrainConfig", "TrainResult", "WeightAverage", "train", "masked_bce", "plot_losses"]
@@ -122,12 +123,6 @@ class WeightAverage:
     def load(self, state: dict[str, Any]) -> None:
         self.model.load_state_dict(state["state_dict"])
         self.updates = int(state["updates"])
-
-
-def masked_bce(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """BCEWithLogits averaged over valid, unpadded pixels only (paper III.E.b)."""
-    loss = nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none")
-    return (loss * mask).sum() / mask.sum().clamp_min(1.0)
 
 
 def _evaluate(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int) -> tuple[float, float]:

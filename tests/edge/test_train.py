@@ -10,8 +10,8 @@ from edge.errors import ConfigError, ModelError
 from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
 from edge.train.data import FrameSet, make_batch, split_indices
-from edge.train.distributed import soft_jaccard
-from edge.train.loop import TrainConfig, masked_bce, train
+from edge.train.loop import TrainConfig, train
+from edge.train.losses import masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
 
 META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True)
