@@ -188,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
             "minutes": round(res.minutes, 2), "best": str(res.best_path), "train_frames": len(train_set),
             "val_frames": len(val_set),
             "val_iou": next((h["val_iou"] for h in res.history if h["epoch"] == res.best_epoch), None),
+            "stopped": res.stopped or None,
         }
         if not main_rank:
             return 0
@@ -196,6 +197,9 @@ def main(argv: list[str] | None = None) -> int:
         else:
             print(f"best epoch {summary['best_epoch']} (val loss {res.best_val_loss:.4f}, val IoU "
                   f"{summary['val_iou']:.4f}) after {res.epochs_run} epochs, {res.minutes:.1f} min -> {res.best_path}")
+        if res.stopped == "max_minutes":  # a shorter run than asked for: say so, and how to finish it
+            print(f"stopped after epoch {res.epochs_run} of {cfg.epochs}: another epoch would pass --max-minutes "
+                  f"{cfg.max_minutes:g}; to finish, rerun with --resume and a larger --max-minutes", file=sys.stderr)
         return 0
 
     return run(PROG, body, parser)

@@ -26,7 +26,7 @@ DATA=${DATA:-data/train_v9}
 RUN=${RUN:-runs/v10}
 FRAMES=${FRAMES:-20000}
 EPOCHS=${EPOCHS:-11}
-MINUTES=${MINUTES:-55}
+MINUTES=${MINUTES:-}  # a wall-clock cap (minutes) for trials; unset, all epochs run, so the model is the same on a slow machine
 CONFIG=${CONFIG:-tools/default_sim_config.json}
 INSTALL=${INSTALL:-1}  # 0: train a candidate in $RUN without installing it as the default
 FLAGS=${FLAGS:-}  # further depthseg-train flags for a candidate, split on spaces (v8 was FLAGS=--full-skip before it joined the recipe)
@@ -34,7 +34,7 @@ start=$(date +%s)
 $BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config "$CONFIG"
 $BIN/depthseg-train --data "$DATA" --out "$RUN" --encoder vgg11 --batch-norm --width 0.125 \
   --in-channels 3 --cues height --standardize robust --extra-skip --full-skip --split 0.85,0.1,0.05 --epochs "$EPOCHS" --batch-size 16 --lr 1e-3 --lr-schedule cosine \
-  --patience 6 --max-minutes "$MINUTES" --seed 0 --threads 2 --ema 0.999 $FLAGS
+  --patience 6 ${MINUTES:+--max-minutes "$MINUTES"} --seed 0 --threads 2 --ema 0.999 $FLAGS
 if [ "$INSTALL" = 1 ]; then
   cp "$RUN/best.pt" edge/models/default.pt
   $BIN/depthseg-export --model edge/models/default.pt --single-channel --out edge/models/default.onnx --data "$DATA"

@@ -86,6 +86,7 @@ class TrainResult:
     history: list[dict[str, Any]] = field(default_factory=list)
     minutes: float = 0.0
     best_path: Path | None = None
+    stopped: str = ""  # why training ended before cfg.epochs: "patience", "max_minutes"; "" = ran them all
 
 
 class WeightAverage:
@@ -271,10 +272,12 @@ def train(
     t0 = time.time()
     info = dict(training_info or {})
     epoch = start_epoch  # 1-based number of the last epoch run
+    stopped = ""
     for i in range(start_epoch, cfg.epochs):  # i: 0-based index (schedule and shuffling seed)
         epoch = i + 1
         if best_epoch > 0 and epoch - best_epoch > cfg.patience:
             epoch -= 1
+            stopped = "patience"
             break
         te = time.time()
         for g in opt.param_groups:
@@ -333,7 +336,8 @@ def train(
                 on_epoch(row)
         if cfg.max_minutes is not None:
             per_epoch = (time.time() - t0) / 60 / (epoch - start_epoch)
-            if dist.agree(minutes + per_epoch > cfg.max_minutes):
+            if epoch < cfg.epochs and dist.agree(minutes + per_epoch > cfg.max_minutes):
+                stopped = "max_minutes"
                 break
     # the final best.pt carries the complete history and the final recipe facts
     best = out / "best.pt"
@@ -347,4 +351,4 @@ def train(
         save_checkpoint(best, model_b, bm.with_(training=rec), epoch=blob["epoch"], epoch_base=1,
                         best_val_loss=best_loss, history=history)
     return TrainResult(best_epoch, best_loss, epoch, history,
-                       elapsed_before + (time.time() - t0) / 60, best if best.exists() else None)
+                       elapsed_before + (time.time() - t0) / 60, best if best.exists() else None, stopped)

@@ -205,3 +205,17 @@ def test_jaccard_term_trains_and_is_recorded_while_the_logged_loss_stays_bce(tmp
     # ...but the term changes the gradient, so the weights part after the first step
     assert plain.history[-1]["train_loss"] != jac.history[-1]["train_loss"]
     assert read_checkpoint(tmp_path / "jac" / "best.pt")["meta"]["training"]["config"]["jaccard"] == 0.5
+
+
+def test_a_wall_clock_budget_stops_early_and_says_so(tmp_path, capsys) -> None:
+    fs = _frames(8)
+    tr, va = fs.subset(np.arange(6)), fs.subset(np.arange(6, 8))
+    res = train(META, tr, va, tmp_path / "r", TrainConfig(epochs=3, batch_size=4, threads=1, max_minutes=1e-6))
+    assert res.epochs_run == 1 and res.stopped == "max_minutes"
+    full = train(META, tr, va, tmp_path / "f", TrainConfig(epochs=2, batch_size=4, threads=1, max_minutes=1e-6 + 1e3))
+    assert full.epochs_run == 2 and full.stopped == ""
+    _write_tiny_mcap(tmp_path / "x")
+    rc = train_main(["--data", str(tmp_path / "x"), "--out", str(tmp_path / "cli"), "--epochs", "3", "--width", "0.0625",
+                     "--batch-size", "2", "--threads", "1", "--max-minutes", "1e-6", "--split", "0.5,0.5,0"])
+    err = capsys.readouterr().err
+    assert rc == 0 and "stopped after epoch 1 of 3" in err and "--resume" in err
