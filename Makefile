@@ -7,7 +7,7 @@ STAMP := $(VENV)/.depthseg-installed
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml tools/setup.sh
+$(STAMP): pyproject.toml tools/setup.sh tools/constraints.txt
 	bash tools/setup.sh
 	touch $(STAMP)
 

@@ -8,7 +8,10 @@ exactly the frames an uninterrupted one would: none lost, none duplicated.
 
 ``manifest.json`` in the output folder records the seed, shard size, configuration (and its
 digest) and the mesh library, so a resume with different options is refused instead of mixing
-two datasets, plus per-shard statistics for the summary.
+two datasets, plus per-shard statistics for the summary. It also records the versions of the
+libraries whose arithmetic makes the frames (`engines`): a drop of a dozen objects is chaotic,
+so mujoco 3.14, 3.17 and 4.0 settle the same seed's scene differently (measured 2026-12-01),
+and a resume under other versions would mix two datasets under one seed.
 
 `simulate` is the library call; `sim.cli` parses the flags and prints.
 """
@@ -29,8 +32,8 @@ from edge.cliutil import progress
 from edge.errors import ConfigError, DataError, DepthsegError
 from edge.provenance import provenance
 
-__all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "MANIFEST", "MAX_FRAMES",
-           "MAX_SHARDS"]
+__all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "engines", "MANIFEST",
+           "MAX_FRAMES", "MAX_SHARDS"]
 
 TOOL = "depthseg-sim"  # recorded in the manifest
 SIM_EXTRA = "install the simulator extra: pip install 'depthseg[sim]'"
@@ -38,6 +41,22 @@ SIM_EXTRA = "install the simulator extra: pip install 'depthseg[sim]'"
 MANIFEST = "manifest.json"
 _SHARD_RE = re.compile(r"^frames_(\d{8})_(\d{8})\.mcap$")
 _TMP_RE = re.compile(r"^\.frames_\d{8}_\d{8}\.mcap\.\d+\.tmp$")
+
+
+ENGINES = ("mujoco", "open3d", "numpy", "scipy")  # the libraries a frame's numbers depend on
+
+
+def engines() -> dict[str, str]:
+    """Installed version of each of `ENGINES` (``"absent"`` when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out: dict[str, str] = {}
+    for name in ENGINES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "absent"
+    return out
 
 
 def shard_name(start: int, stop: int) -> str:
@@ -207,6 +226,14 @@ def _check_manifest(out: Path, ident: dict[str, Any]) -> dict[str, Any]:
                 f"`out` {out} holds frames made with a different {key} ({old.get(key)!r} vs {ident[key]!r}); "
                 "resume with the same options or choose another `out`"
             )
+    # a manifest from before the versions were recorded says nothing, and resumes as it did
+    for name, was in (old.get("engines") or {}).items():
+        now = ident["engines"].get(name, "absent")
+        if name in ENGINES and was != now:
+            raise ConfigError(
+                f"`out` {out} holds frames made with {name} {was}, this is {name} {now}, and its frames would "
+                f"differ; resume with pip install '{name}=={was}' or choose another `out`"
+            )
     return old
 
 
@@ -299,6 +326,7 @@ def simulate(
         "shard_frames": int(shard_frames),
         "config_digest": config.digest(),
         "objects": None if library_paths is None else sorted(Path(p).name for p in library_paths),
+        "engines": engines(),
     }
     old = _check_manifest(out, ident)
     lo, hi = (0, frames) if frames_range is None else frames_range

@@ -21,5 +21,6 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 # torch first and pinned: this takes the CPU wheel; an open range would pull a CUDA build.
 .venv/bin/python -m pip install -q "torch==2.13.0"
-.venv/bin/python -m pip install -q -e ".[sim,train,dev,ros,ray]"
+# -c: the versions the documented numbers were made with (the simulator's frames depend on them)
+.venv/bin/python -m pip install -q -c tools/constraints.txt -e ".[sim,train,dev,ros,ray]"
 echo "setup: .venv ready"

@@ -132,6 +132,26 @@ def test_resume_with_other_options_is_refused(dataset, capsys):
     _fails(capsys, ["--out", str(out), "--frames", "5", "--seed", "5", "--shard-frames", "3"], "different seed")
 
 
+def test_resume_under_another_physics_version_is_refused(dataset, tmp_path, capsys):
+    import shutil
+
+    out, _ = dataset
+    m = json.loads((out / "manifest.json").read_text())
+    assert m["engines"] == sim_dataset.engines() and set(m["engines"]) == {"mujoco", "open3d", "numpy", "scipy"}
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    m["engines"]["mujoco"] = "0.0.1"  # as if the frames had been made by another mujoco
+    (copy / "manifest.json").write_text(json.dumps(m))
+    now = sim_dataset.engines()["mujoco"]
+    _fails(capsys, ["--out", str(copy), "--frames", "5", "--seed", "4", "--shard-frames", "3"],
+           f"made with mujoco 0.0.1, this is mujoco {now}, and its frames would differ; resume with pip install "
+           "'mujoco==0.0.1' or choose another --out")
+    assert sorted(p.name for p in copy.iterdir()) == sorted(p.name for p in out.iterdir())  # nothing touched
+    del m["engines"]  # a manifest from before versions were recorded resumes as before
+    (copy / "manifest.json").write_text(json.dumps(m))
+    assert cli.main(["--out", str(copy), "--frames", "5", "--seed", "4", "--shard-frames", "3"]) == 0
+
+
 def test_mesh_library_run_warns_once_per_bad_mesh(tmp_path, capsys):
     import open3d as o3d
 
