@@ -40,9 +40,24 @@ def import_ray():
     return ray
 
 
-def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str) -> dict:
-    """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker)."""
+def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str,
+                engines: dict[str, str] | None = None) -> dict:
+    """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker).
+
+    ``engines``: the driver's `sim.dataset.engines`. A node with other physics or ray-casting
+    versions would write other frames under the same seed, so its task fails before writing.
+    """
+    import socket
+
     from sim import dataset
+
+    here = dataset.engines()
+    for name, want in (engines or {}).items():
+        if here.get(name) != want:
+            raise DataError(
+                f"the Ray worker on {socket.gethostname()} has {name} {here.get(name)} where the driver has {want}, "
+                f"so its frames would differ; install pip install '{name}=={want}' on every node (tools/constraints.txt)"
+            )
 
     key = (repr(config_dict), seed, tuple(library_paths or ()), out)
     if dataset._W.get("ray_key") != key:
@@ -129,7 +144,10 @@ def run_shards(
     try:
         task = ray.remote(num_cpus=1, max_retries=int(MAX_RETRIES if max_retries is None else max_retries))(_shard_task)
         cfg_ref = ray.put(config_dict)
-        pending = [task.remote(t, cfg_ref, int(seed), library_paths, str(out)) for t in todo]
+        from sim.dataset import engines
+
+        mine = engines()
+        pending = [task.remote(t, cfg_ref, int(seed), library_paths, str(out), mine) for t in todo]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             try:
@@ -137,6 +155,9 @@ def run_shards(
             except ray.exceptions.RayError as exc:
                 for ref in pending:
                     ray.cancel(ref, force=True)
+                cause = getattr(exc, "cause", None)
+                if isinstance(cause, DataError):  # a task's own one-line refusal (another node's versions)
+                    raise DataError(f"{cause}; complete shards are kept") from None
                 first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 raise DataError(
                     f"a Ray task failed ({type(exc).__name__}: {first}); complete shards are kept: "

@@ -108,3 +108,22 @@ def test_killed_ray_worker_loses_and_duplicates_nothing_on_rerun(tmp_path, refer
     stamps = [f.stamp_ns for f in iter_frames(out)]
     assert len(stamps) == len(set(stamps)) == FRAMES
     assert _manifest(out)["shards"] == _manifest(reference)["shards"]
+
+
+def test_a_node_with_other_physics_versions_writes_nothing(tmp_path):
+    from sim.ray_runner import _shard_task
+
+    out = tmp_path / "o"
+    out.mkdir()
+    with pytest.raises(DataError, match=r"has mujoco .* where the driver has 0\.0\.1, so its frames would differ"):
+        _shard_task((0, SHARD), LIGHT.to_dict(), SEED, None, str(out), {"mujoco": "0.0.1"})
+    assert list(out.iterdir()) == []
+
+
+def test_ray_run_refuses_workers_whose_versions_differ_from_the_driver(tmp_path, local_ray, monkeypatch):
+    real = dataset.engines()
+    monkeypatch.setattr(dataset, "engines", lambda: dict(real, mujoco="0.0.1"))  # the driver only: tasks run elsewhere
+    with pytest.raises(DataError, match=r"where the driver has 0\.0\.1.*; complete shards are kept"):
+        dataset.simulate(tmp_path / "o", FRAMES, seed=SEED, workers=2, config=LIGHT, shard_frames=SHARD,
+                         show_progress=False, ray="")
+    assert not list((tmp_path / "o").glob("frames_*.mcap"))
