@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
 
         require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
-        from edge.train.data import load_frames, split_indices
+        from edge.train.data import data_identity, load_frames, split_indices
         from edge.train.loop import TrainConfig, train
 
         if bool(args.data) == bool(args.train_dir):
@@ -163,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         info = {
             "command": " ".join([PROG] + [shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])]),
             "data": [str(p) for p in (args.data or args.train_dir)],
+            "data_identity": data_identity(args.data or args.train_dir),
             "input": ("Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel")
             + (f" + cues {list(cues)}" if cues else "") + f"; standardize={args.standardize}",
             "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",

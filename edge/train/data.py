@@ -18,7 +18,9 @@ from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import preprocess_for
 
-__all__ = ["FrameSet", "load_frames", "split_indices", "make_batch"]
+__all__ = ["FrameSet", "load_frames", "split_indices", "make_batch", "data_identity"]
+
+MANIFEST_KEYS = ("tool", "seed", "frames", "config_digest", "engines", "provenance")  # what names a simulated set
 
 
 @dataclass
@@ -81,6 +83,32 @@ def load_frames(
     if not depths:
         raise DataError(f"no labelled frames found in {[str(p) for p in paths]}")
     return FrameSet(np.stack(depths), np.stack(labels))
+
+
+def data_identity(paths: list[str | Path]) -> list[dict]:
+    """For each training path, what made it: the simulator manifest's identity, else just the path.
+
+    Why: a model found on a robot months later should say which frames it learned from, down to
+    the physics library's version (the simulator's frames change with it: `sim.dataset`). A
+    recording or a folder without a readable ``manifest.json`` is named by its path only.
+
+    Args:
+        paths: the ``--data`` / ``--train-dir`` arguments, files or folders.
+    """
+    import json
+
+    out: list[dict] = []
+    for p in paths:
+        rec: dict = {"path": str(p)}
+        man = Path(p) / "manifest.json"
+        try:
+            m = json.loads(man.read_text()) if man.is_file() and man.stat().st_size < 64 * 1024 * 1024 else None
+        except (OSError, ValueError):
+            m = None
+        if isinstance(m, dict):
+            rec.update({k: m[k] for k in MANIFEST_KEYS if k in m})
+        out.append(rec)
+    return out
 
 
 def split_indices(n: int, fractions: tuple[float, float, float], seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -219,3 +219,25 @@ def test_a_wall_clock_budget_stops_early_and_says_so(tmp_path, capsys) -> None:
                      "--batch-size", "2", "--threads", "1", "--max-minutes", "1e-6", "--split", "0.5,0.5,0"])
     err = capsys.readouterr().err
     assert rc == 0 and "stopped after epoch 1 of 3" in err and "--resume" in err
+
+
+def test_the_training_record_names_what_made_each_data_set(tmp_path) -> None:
+    import json
+
+    from edge.train.data import data_identity
+
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    man = {"tool": "depthseg-sim", "seed": 1, "frames": 20000, "config_digest": "abc", "shards": {"f": {}},
+           "engines": {"mujoco": "4.0.0"}, "provenance": {"git_commit": "x"}}
+    (sim / "manifest.json").write_text(json.dumps(man))
+    (tmp_path / "broken").mkdir()
+    (tmp_path / "broken" / "manifest.json").write_text("{not json")
+    got = data_identity([sim, tmp_path / "rec.mcap", tmp_path / "broken"])
+    assert got[0] == {"path": str(sim), **{k: v for k, v in man.items() if k != "shards"}}  # no per-shard stats
+    assert got[1:] == [{"path": str(tmp_path / "rec.mcap")}, {"path": str(tmp_path / "broken")}]
+    _write_tiny_mcap(tmp_path / "x")
+    assert train_main(["--data", str(tmp_path / "x"), "--out", str(tmp_path / "cli"), "--epochs", "1", "--width",
+                       "0.0625", "--batch-size", "2", "--threads", "1", "--split", "0.5,0.5,0"]) == 0
+    rec = read_checkpoint(tmp_path / "cli" / "best.pt")["meta"]["training"]
+    assert rec["data_identity"] == [{"path": str(tmp_path / "x")}]
