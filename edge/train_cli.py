@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--train-dir", nargs="+", help="explicit training recordings (.mcap, .bag, .db3, bag directories) or directories of them")
     d.add_argument("--val-dir", nargs="+", help="explicit validation recordings or directories of them")
     d.add_argument("--split", default="0.7,0.2,0.1", help="train,val,test fractions for --data (default: %(default)s, the paper's)")
+    d.add_argument("--split-unit", choices=("scene", "frame"), default="scene",
+                   help="what --split deals out: whole simulated scenes, so that no view of a validation scene is "
+                        "trained on (default), or single frames (the recipe of models up to v10)")
     d.add_argument("--limit", type=int, help="use at most this many frames (quick experiments)")
     d.add_argument("--depth-topic", default=None, help="depth Image topic (default: auto-detected, as depthseg-eval)")
     d.add_argument("--labels-topic", default=None,
@@ -155,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         with progress(desc="loading frames", unit="frame", disable=quiet) as bar:
             if args.data:
                 allf = load_frames(args.data, limit=args.limit, progress=bar, **topics)
-                tr, va, _te = split_indices(len(allf), fr, args.seed)
+                tr, va, _te = split_indices(len(allf), fr, args.seed, allf.scene if args.split_unit == "scene" else None)
                 train_set, val_set = allf.subset(tr), allf.subset(va)
             else:
                 train_set = load_frames(args.train_dir, limit=args.limit, progress=bar, **topics)
@@ -164,6 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             "command": " ".join([PROG] + [shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:])]),
             "data": [str(p) for p in (args.data or args.train_dir)],
             "data_identity": data_identity(args.data or args.train_dir),
+            "split_unit": args.split_unit if args.data else None,
             "input": ("Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel")
             + (f" + cues {list(cues)}" if cues else "") + f"; standardize={args.standardize}",
             "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",

@@ -14,7 +14,9 @@
 # 2. train a compact FCN-8s (VGG11 encoder with batch norm, width x0.125, extra pool2/pool1 skips
 #    and the full-resolution conv1 skip,
 #    depth replicated to 3 channels as in the paper plus a height-above-dominant-plane channel,
-#    robust standardisation) from scratch with an 85/10/5 split and early stopping, validating
+#    robust standardisation) from scratch with an 85/10/5 split and early stopping (a split of
+#    frames, --split-unit frame, as for every default so far, so that this script still makes the
+#    shipped model; depthseg-train's own default deals whole scenes), validating
 #    and keeping an exponential moving average of the weights (--ema 0.999, ~1,000 steps),
 # 3. install the best weights as the default and export the single-channel ONNX model (first-conv
 #    weights summed over the three depth channels; the height channel's weights kept).
@@ -33,7 +35,7 @@ FLAGS=${FLAGS:-}  # further depthseg-train flags for a candidate, split on space
 start=$(date +%s)
 $BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config "$CONFIG"
 $BIN/depthseg-train --data "$DATA" --out "$RUN" --encoder vgg11 --batch-norm --width 0.125 \
-  --in-channels 3 --cues height --standardize robust --extra-skip --full-skip --split 0.85,0.1,0.05 --epochs "$EPOCHS" --batch-size 16 --lr 1e-3 --lr-schedule cosine \
+  --in-channels 3 --cues height --standardize robust --extra-skip --full-skip --split 0.85,0.1,0.05 --split-unit frame --epochs "$EPOCHS" --batch-size 16 --lr 1e-3 --lr-schedule cosine \
   --patience 6 ${MINUTES:+--max-minutes "$MINUTES"} --seed 0 --threads 2 --ema 0.999 $FLAGS
 if [ "$INSTALL" = 1 ]; then
   cp "$RUN/best.pt" edge/models/default.pt

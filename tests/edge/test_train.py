@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from edge.errors import ConfigError, ModelError
+from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
-from edge.train.data import FrameSet, make_batch, split_indices
+from edge.train.data import FrameSet, load_frames, make_batch, split_indices
 from edge.train.loop import TrainConfig, train
 from edge.train.losses import masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
@@ -241,3 +241,32 @@ def test_the_training_record_names_what_made_each_data_set(tmp_path) -> None:
                        "0.0625", "--batch-size", "2", "--threads", "1", "--split", "0.5,0.5,0"]) == 0
     rec = read_checkpoint(tmp_path / "cli" / "best.pt")["meta"]["training"]
     assert rec["data_identity"] == [{"path": str(tmp_path / "x")}]
+
+
+def test_a_scene_split_keeps_every_view_of_a_scene_on_one_side() -> None:
+    scene = np.arange(400) // 4  # 4 views a scene, as the simulator's default
+    parts = split_indices(400, (0.7, 0.2, 0.1), seed=3, scene=scene)
+    sides = [set(scene[p].tolist()) for p in parts]
+    assert not (sides[0] & sides[1]) and not (sides[0] & sides[2]) and not (sides[1] & sides[2])
+    assert [len(p) for p in parts] == [280, 80, 40] and len(set(np.concatenate(parts).tolist())) == 400
+    assert all(np.array_equal(x, y) for x, y in zip(parts, split_indices(400, (0.7, 0.2, 0.1), 3, scene)))
+    # the frame split shares nearly every validation scene with training
+    tr, va, _ = split_indices(400, (0.7, 0.2, 0.1), seed=3)
+    assert np.isin(scene[va], scene[tr]).mean() > 0.9
+    # one view a scene: the scene split is the frame split, index for index
+    for n, fr in ((100, (0.7, 0.2, 0.1)), (10, (0.5, 0.5, 0.0)), (5, (0.8, 0.1, 0.1))):
+        same = zip(split_indices(n, fr, 1), split_indices(n, fr, 1, np.arange(n)))
+        assert all(np.array_equal(x, y) for x, y in same)
+    with pytest.raises(DataError, match="at least 3 scenes"):
+        split_indices(8, (0.7, 0.2, 0.1), 0, np.arange(8) // 4)
+
+
+def test_simulated_views_of_one_scene_load_with_one_scene_number(tmp_path) -> None:
+    from sim.dataset import simulate
+    from sim.generate import SimConfig
+
+    cfg = SimConfig.from_dict({"scene": {"n_objects": [0, 2], "views_per_scene": 2}})
+    simulate(tmp_path / "s", frames=6, seed=0, workers=1, shard_frames=2, config=cfg, show_progress=False)
+    fs = load_frames([tmp_path / "s"])
+    assert fs.scene.tolist() == [0, 0, 1, 1, 2, 2]
+    assert fs.subset(np.array([5, 0])).scene.tolist() == [2, 0]
