@@ -157,11 +157,13 @@ def split_indices(n: int, fractions: tuple[float, float, float], seed: int,
     ids, first, inverse = np.unique(scene, return_index=True, return_inverse=True)
     if len(ids) < 3:
         raise DataError(f"need at least 3 scenes to split into train/val/test, got {len(ids)}")
-    rank = np.argsort(np.argsort(first, kind="stable"), kind="stable")  # scenes in order of first frame
-    order = np.random.default_rng(seed).permutation(len(ids))  # the frame split's permutation, of scenes
-    members = [np.flatnonzero(inverse == g) for g in np.argsort(rank)]
-    frames_in_order = np.concatenate([members[g] for g in order])
-    ends = np.cumsum([len(members[g]) for g in order])
+    g = len(ids)
+    ordinal = np.argsort(np.argsort(first, kind="stable"), kind="stable")[inverse.ravel()]  # by first frame
+    order = np.random.default_rng(seed).permutation(g)  # the frame split's permutation, of scenes
+    place = np.empty(g, np.int64)
+    place[order] = np.arange(g)
+    frames_in_order = np.lexsort((np.arange(n), place[ordinal]))  # scenes dealt in `order`, O(n log n)
+    ends = np.cumsum(np.bincount(ordinal, minlength=g)[order])
     # deal whole scenes: train takes scenes until it holds >= a frames, validation until >= a + b
     cut_a = min(int(np.searchsorted(ends, a)) + 1, len(order) - 2)
     cut_b = min(max(int(np.searchsorted(ends, a + b)) + 1, cut_a + 1), len(order))
