@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Recipe of the shipped default model (edge/models/default.pt and default.onnx).
 #
-#   bash tools/train_default.sh            # ~58 min on a quiet 2-core machine (v10, 2026-12-01: training and export 55 min, the simulation alone 3.4 min); BENCHMARKS.md ("Issue 9: candidate v10, a weight average")
+#   bash tools/train_default.sh            # ~60 min on a 2-core machine (v12, 2026-12-01: training 54.8 min, export < 1 min, the simulation of 24,000 frames ~3.3 min); BENCHMARKS.md ("Issue 9: candidate v12, 24,000 frames")
 #
-# 1. simulate 20,000 labelled frames (seed 1; 4 camera views of each of 5,000 settled scenes, which
+# 1. simulate 24,000 labelled frames (seed 1; 4 camera views of each of 6,000 settled scenes, which
 #    makes ~100 frames/s with 2 workers) with the pico flexx sensor model, wider domain
 #    randomisation and the scene families where a plane fit fails (tools/default_sim_config.json:
 #    noise level x0.7-3.5, 30 % white-noise frames as BlenSor's, dead-corner cone 31.5-38 deg, edges
@@ -24,9 +24,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=.venv/bin
-DATA=${DATA:-data/train_v9}
-RUN=${RUN:-runs/v10}
-FRAMES=${FRAMES:-20000}
+DATA=${DATA:-data/train_v12}
+RUN=${RUN:-runs/v12}
+FRAMES=${FRAMES:-24000}
 EPOCHS=${EPOCHS:-11}
 MINUTES=${MINUTES:-}  # a wall-clock cap (minutes) for trials; unset, all epochs run, so the model is the same on a slow machine
 CONFIG=${CONFIG:-tools/default_sim_config.json}
