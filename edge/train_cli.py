@@ -43,7 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--split", default="0.7,0.2,0.1", help="train,val,test fractions for --data (default: %(default)s, the paper's)")
     d.add_argument("--split-unit", choices=("scene", "frame"), default="scene",
                    help="what --split deals out: whole simulated scenes, so that no view of a validation scene is "
-                        "trained on (default), or single frames (the recipe of models up to v10)")
+                        "trained on (default), or single frames (the recipe of every shipped default up to v12)")
     d.add_argument("--limit", type=int, help="use at most this many frames (quick experiments)")
     d.add_argument("--depth-topic", default=None, help="depth Image topic (default: auto-detected, as depthseg-eval)")
     d.add_argument("--labels-topic", default=None,

@@ -56,7 +56,7 @@ def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_pat
         if here.get(name) != want:
             raise DataError(
                 f"the Ray worker on {socket.gethostname()} has {name} {here.get(name)} where the driver has {want}, "
-                f"so its frames would differ; install pip install '{name}=={want}' on every node (tools/constraints.txt)"
+                f"so its frames would differ; run pip install '{name}=={want}' on every node (tools/constraints.txt)"
             )
 
     key = (repr(config_dict), seed, tuple(library_paths or ()), out)
