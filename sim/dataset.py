@@ -32,8 +32,8 @@ from edge.cliutil import progress
 from edge.errors import ConfigError, DataError, DepthsegError
 from edge.provenance import provenance
 
-__all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "engines", "MANIFEST",
-           "MAX_FRAMES", "MAX_SHARDS"]
+__all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "engines", "engine_mismatch",
+           "MANIFEST", "MAX_FRAMES", "MAX_SHARDS"]
 
 TOOL = "depthseg-sim"  # recorded in the manifest
 SIM_EXTRA = "install the simulator extra: pip install 'depthseg[sim]'"
@@ -57,6 +57,25 @@ def engines() -> dict[str, str]:
         except PackageNotFoundError:
             out[name] = "absent"
     return out
+
+
+def engine_mismatch(recorded: Any) -> tuple[str, str, str] | None:
+    """The first of `ENGINES` whose version in ``recorded`` differs from the installed one, as
+    ``(name, recorded, installed)``; None when all agree or nothing usable was recorded.
+
+    One rule for both places frames could mix: a resumed folder (`_check_manifest`) and a Ray
+    node (`sim.ray_runner`). A manifest from before the versions were recorded says nothing.
+
+    Args:
+        recorded: a ``{library: version}`` mapping (the manifest's or the driver's ``engines``).
+    """
+    if not isinstance(recorded, dict):
+        return None
+    here = engines()
+    for name in ENGINES:
+        if name in recorded and str(recorded[name]) != here[name]:
+            return name, str(recorded[name]), here[name]
+    return None
 
 
 def shard_name(start: int, stop: int) -> str:
@@ -226,14 +245,13 @@ def _check_manifest(out: Path, ident: dict[str, Any]) -> dict[str, Any]:
                 f"`out` {out} holds frames made with a different {key} ({old.get(key)!r} vs {ident[key]!r}); "
                 "resume with the same options or choose another `out`"
             )
-    # a manifest from before the versions were recorded says nothing, and resumes as it did
-    for name, was in (old.get("engines") or {}).items():
-        now = ident["engines"].get(name, "absent")
-        if name in ENGINES and was != now:
-            raise ConfigError(
-                f"`out` {out} holds frames made with {name} {was}, this is {name} {now}, and its frames would "
-                f"differ; resume with pip install '{name}=={was}' or choose another `out`"
-            )
+    bad = engine_mismatch(old.get("engines"))
+    if bad is not None:
+        name, was, now = bad
+        raise ConfigError(
+            f"`out` {out} holds frames made with {name} {was}, this is {name} {now}, and its frames would "
+            f"differ; resume with pip install '{name}=={was}' or choose another `out`"
+        )
     return old
 
 

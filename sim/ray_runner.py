@@ -51,13 +51,13 @@ def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_pat
 
     from sim import dataset
 
-    here = dataset.engines()
-    for name, want in (engines or {}).items():
-        if here.get(name) != want:
-            raise DataError(
-                f"the Ray worker on {socket.gethostname()} has {name} {here.get(name)} where the driver has {want}, "
-                f"so its frames would differ; run pip install '{name}=={want}' on every node (tools/constraints.txt)"
-            )
+    bad = dataset.engine_mismatch(engines)
+    if bad is not None:
+        name, want, have = bad
+        raise DataError(
+            f"the Ray worker on {socket.gethostname()} has {name} {have} where the driver has {want}, "
+            f"so its frames would differ; run pip install '{name}=={want}' on every node (tools/constraints.txt)"
+        )
 
     key = (repr(config_dict), seed, tuple(library_paths or ()), out)
     if dataset._W.get("ray_key") != key:

@@ -41,7 +41,8 @@ class FrameSet:
 def _scene_key(k: int, pos: int, scene: dict | None) -> tuple:
     """Which settled scene frame ``pos`` of path ``k`` shows: the simulator's scene index when
     it drew several views of one scene (``params.view.scene_index``), else the frame itself."""
-    view = ((scene or {}).get("params") or {}).get("view") if isinstance(scene, dict) else None
+    params = scene.get("params") if isinstance(scene, dict) else None
+    view = params.get("view") if isinstance(params, dict) else None
     if isinstance(view, dict) and isinstance(view.get("scene_index"), int):
         return (k, "scene", view["scene_index"])
     return (k, "frame", pos)

@@ -147,6 +147,10 @@ def test_resume_under_another_physics_version_is_refused(dataset, tmp_path, caps
            f"made with mujoco 0.0.1, this is mujoco {now}, and its frames would differ; resume with pip install "
            "'mujoco==0.0.1' or choose another --out")
     assert sorted(p.name for p in copy.iterdir()) == sorted(p.name for p in out.iterdir())  # nothing touched
+    for unusable in ("4.0.0", None):  # garbage where the versions belong, or none: says nothing, resumes
+        m["engines"] = unusable
+        (copy / "manifest.json").write_text(json.dumps(m))
+        assert cli.main(["--out", str(copy), "--frames", "5", "--seed", "4", "--shard-frames", "3"]) == 0
     del m["engines"]  # a manifest from before versions were recorded resumes as before
     (copy / "manifest.json").write_text(json.dumps(m))
     assert cli.main(["--out", str(copy), "--frames", "5", "--seed", "4", "--shard-frames", "3"]) == 0
