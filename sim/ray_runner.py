@@ -24,7 +24,7 @@ from typing import Any
 
 from edge.errors import ConfigError, DataError
 
-__all__ = ["import_ray", "check_address", "run_shards"]
+__all__ = ["import_ray", "check_address", "check_nodes", "run_shards"]
 
 MAX_RETRIES = 3  # Ray re-runs a task whose worker died this many times before the run stops
 
@@ -40,30 +40,84 @@ def import_ray():
     return ray
 
 
-def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str,
-                engines: dict[str, str] | None = None) -> dict:
-    """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker).
-
-    ``engines``: the driver's `sim.dataset.engines`. A node with other physics or ray-casting
-    versions would write other frames under the same seed, so its task fails before writing.
-    """
+def _refusal(engines: dict[str, str] | None) -> str | None:
+    """The one-line refusal of a node whose physics or ray-casting versions differ from the
+    driver's ``engines`` (`sim.dataset.engine_mismatch`), or None when they agree."""
     import socket
 
     from sim import dataset
 
     bad = dataset.engine_mismatch(engines)
-    if bad is not None:
-        name, want, have = bad
-        raise DataError(
-            f"the Ray worker on {socket.gethostname()} has {name} {have} where the driver has {want}, "
-            f"so its frames would differ; run pip install '{name}=={want}' on every node (tools/constraints.txt)"
-        )
+    if bad is None:
+        return None
+    name, want, have = bad
+    return (
+        f"the Ray worker on {socket.gethostname()} has {name} {have} where the driver has {want}, "
+        f"so its frames would differ; run pip install '{name}=={want}' on every node (tools/constraints.txt)"
+    )
+
+
+def _probe_task(engines: dict[str, str]) -> str | None:
+    """Body of the version check run once on every node before any shard is submitted."""
+    return _refusal(engines)
+
+
+def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str,
+                engines: dict[str, str] | None = None) -> dict:
+    """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker).
+
+    ``engines``: the driver's `sim.dataset.engines`. A node with other physics or ray-casting
+    versions would write other frames under the same seed, so its task fails before writing
+    (`check_nodes` refuses such a node up front; this catches one that joined later).
+    """
+    from sim import dataset
+
+    refusal = _refusal(engines)
+    if refusal is not None:
+        raise DataError(refusal)
 
     key = (repr(config_dict), seed, tuple(library_paths or ()), out)
     if dataset._W.get("ray_key") != key:
         dataset._init_worker(config_dict, seed, library_paths, out, None, pooled=False)
         dataset._W["ray_key"] = key
     return dataset._write_shard(task)
+
+
+PROBE_TIMEOUT_S = 120.0  # a node that cannot start one worker in this time is reported, not waited on
+
+
+def check_nodes(ray, engines: dict[str, str], timeout_s: float = PROBE_TIMEOUT_S) -> None:
+    """Refuse the run, before any shard is submitted, when a live node has other versions.
+
+    One zero-CPU task pinned to each live node compares its versions with the driver's, so a
+    mixed cluster stops with one line and no work is started (and none cancelled).
+
+    Args:
+        ray: the connected ``ray`` module.
+        engines: the driver's `sim.dataset.engines`.
+        timeout_s: how long to wait for every node's answer.
+    """
+    from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+    probe = ray.remote(num_cpus=0, max_retries=0)(_probe_task)
+    refs = [
+        probe.options(scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=n["NodeID"], soft=False)).remote(engines)
+        for n in ray.nodes()
+        if n.get("Alive")
+    ]
+    try:
+        answers = ray.get(refs, timeout=timeout_s)
+    except ray.exceptions.GetTimeoutError:
+        raise DataError(
+            f"a Ray node did not answer the version check in {timeout_s:.0f} s; check that every node can start "
+            "a worker ('ray status') and run again"
+        ) from None
+    except ray.exceptions.RayError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise DataError(f"the Ray version check failed ({type(exc).__name__}: {first}); run again") from None
+    for refusal in answers:
+        if refusal is not None:
+            raise DataError(f"{refusal}; nothing was written")
 
 
 CONNECT_TIMEOUT_S = 5.0
@@ -147,14 +201,15 @@ def run_shards(
         from sim.dataset import engines
 
         mine = engines()
+        check_nodes(ray, mine)
         pending = [task.remote(t, cfg_ref, int(seed), library_paths, str(out), mine) for t in todo]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             try:
                 record(ray.get(done[0]))
             except ray.exceptions.RayError as exc:
-                for ref in pending:
-                    ray.cancel(ref, force=True)
+                for ref in pending:  # a plain request: the run stops anyway (force=True would kill worker processes)
+                    ray.cancel(ref)
                 cause = getattr(exc, "cause", None)
                 if isinstance(cause, DataError):  # a task's own one-line refusal (another node's versions)
                     raise DataError(f"{cause}; complete shards are kept") from None

@@ -121,9 +121,21 @@ def test_a_node_with_other_physics_versions_writes_nothing(tmp_path):
 
 
 def test_ray_run_refuses_workers_whose_versions_differ_from_the_driver(tmp_path, local_ray, monkeypatch):
+    from sim import ray_runner
+
     real = dataset.engines()
     monkeypatch.setattr(dataset, "engines", lambda: dict(real, mujoco="0.0.1"))  # the driver only: tasks run elsewhere
-    with pytest.raises(DataError, match=r"where the driver has 0\.0\.1.*; complete shards are kept"):
+    submitted: list = []
+    monkeypatch.setattr(ray_runner, "_shard_task", lambda *a, **k: submitted.append(a))  # must never be reached
+    with pytest.raises(DataError, match=r"where the driver has 0\.0\.1.*; nothing was written$"):
         dataset.simulate(tmp_path / "o", FRAMES, seed=SEED, workers=2, config=LIGHT, shard_frames=SHARD,
                          show_progress=False, ray="")
-    assert not list((tmp_path / "o").glob("frames_*.mcap"))
+    assert submitted == [] and not list((tmp_path / "o").glob("frames_*.mcap"))
+
+
+def test_version_check_asks_every_live_node_once(local_ray):
+    from sim import ray_runner
+
+    ray_runner.check_nodes(local_ray, dataset.engines())  # agreeing versions: no error
+    alive = [n for n in local_ray.nodes() if n.get("Alive")]
+    assert len(alive) == 1
