@@ -57,11 +57,6 @@ def _refusal(engines: dict[str, str] | None) -> str | None:
     )
 
 
-def _probe_task(engines: dict[str, str]) -> str | None:
-    """Body of the version check run once on every node before any shard is submitted."""
-    return _refusal(engines)
-
-
 def _shard_task(task: tuple[int, int], config_dict: dict, seed: int, library_paths: list[str] | None, out: str,
                 engines: dict[str, str] | None = None) -> dict:
     """Body of one Ray task: the same worker code as ``--workers`` (set up once per Ray worker).
@@ -99,7 +94,7 @@ def check_nodes(ray, engines: dict[str, str], timeout_s: float = PROBE_TIMEOUT_S
     """
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-    probe = ray.remote(num_cpus=0, max_retries=0)(_probe_task)
+    probe = ray.remote(num_cpus=0, max_retries=0)(_refusal)  # the per-task rule, run once a node
     refs = [
         probe.options(scheduling_strategy=NodeAffinitySchedulingStrategy(node_id=n["NodeID"], soft=False)).remote(engines)
         for n in ray.nodes()
