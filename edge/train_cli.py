@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
                    "under torchrun give each process its share of the cores)")
+    t.add_argument("--memory-format", default="channels_last", choices=("channels_last", "contiguous"),
+                   help="layout of weights and inputs while training (default %(default)s: NHWC, 2-2.6x faster "
+                   "steps on a CPU; checkpoints are stored in the usual layout either way)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     return p
@@ -134,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
-            ema=args.ema, jaccard=args.jaccard,
+            ema=args.ema, jaccard=args.jaccard, memory_format=args.memory_format,
         )
         from edge.train.encoders import list_encoders
 

@@ -26,6 +26,13 @@ __all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "checkpoint_
 CHECKPOINT_FORMAT = "depthseg-checkpoint"
 
 
+def contiguous_state(state: dict[str, Any]) -> dict[str, Any]:
+    """``state`` with every tensor in the default (NCHW) layout: a model trained channels-last
+    (`edge.train.loop.TrainConfig.memory_format`) is stored as any other, so code that reads a
+    checkpoint never meets its training layout."""
+    return {k: v.contiguous() if isinstance(v, torch.Tensor) else v for k, v in state.items()}
+
+
 def save_checkpoint(path: str | Path, model: FCN8s, meta: ModelMeta, **extra: Any) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -33,7 +40,8 @@ def save_checkpoint(path: str | Path, model: FCN8s, meta: ModelMeta, **extra: An
     from edge.provenance import provenance
 
     blob = {
-        "format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(), "state_dict": model.state_dict(),
+        "format": CHECKPOINT_FORMAT, "version": 1, "meta": meta.to_dict(),
+        "state_dict": contiguous_state(model.state_dict()),
         "provenance": provenance(),  # depthseg version and git commit that wrote it
     }
     blob.update(extra)

@@ -270,3 +270,32 @@ def test_simulated_views_of_one_scene_load_with_one_scene_number(tmp_path) -> No
     fs = load_frames([tmp_path / "s"])
     assert fs.scene.tolist() == [0, 0, 1, 1, 2, 2]
     assert fs.subset(np.array([5, 0])).scene.tolist() == [2, 0]
+
+
+def test_channels_last_training_is_the_same_arithmetic_and_stores_the_usual_layout(tmp_path) -> None:
+    fs = _frames(12)
+    tr, va = fs.subset(np.arange(8)), fs.subset(np.arange(8, 12))
+    runs = {}
+    for fmt in ("channels_last", "contiguous"):
+        cfg = TrainConfig(epochs=1, batch_size=4, lr=1e-3, seed=0, threads=1, ema=0.9, memory_format=fmt)
+        res = train(META, tr, va, tmp_path / fmt, cfg)
+        runs[fmt] = (res.history[0], read_checkpoint(tmp_path / fmt / "best.pt"), read_checkpoint(tmp_path / fmt / "last.pt"))
+    (h_cl, best_cl, last_cl), (h_c, best_c, _) = runs["channels_last"], runs["contiguous"]
+    assert h_cl["train_loss"] == pytest.approx(h_c["train_loss"], rel=1e-4)
+    assert h_cl["val_loss"] == pytest.approx(h_c["val_loss"], rel=1e-4)
+    diffs = []
+    for k, v in best_cl["state_dict"].items():
+        assert v.is_contiguous(), k  # stored NCHW whatever the training layout
+        if v.dtype.is_floating_point:
+            diffs.append((v - best_c["state_dict"][k]).abs().flatten())
+    d = torch.cat(diffs)
+    # Adam moves a weight by ~lr a step whatever its gradient's size, so a rounding-level gradient
+    # near zero may step the other way: bounded by lr x steps, and rare
+    assert float(d.max()) <= 2 * 1e-3 * 2
+    assert float(d.mean()) < 0.1 * 1e-3  # a tenth of one step on average
+    assert all(v.is_contiguous() for v in last_cl["weight_average"]["state_dict"].values())
+
+
+def test_an_unknown_memory_format_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="memory format must be one of channels_last, contiguous"):
+        TrainConfig(memory_format="nhwc")

@@ -1,0 +1,110 @@
+#!/usr/bin/env python
+"""Time training steps of one architecture in each memory format, interleaved, on this CPU.
+
+Why: the retraining recipe has a 60-minute budget on 2 cores (issue 9), and the step (forward,
+backward, Adam) is nearly all of an epoch. The compact models have 8-64 channels at up to full
+resolution, where the layout of weights and inputs decides the speed of oneDNN's convolutions.
+This tool runs the training loop's own pieces (`edge.train.data.make_batch`,
+`edge.train.distributed.Dist.loss`, Adam) with ``--memory-format`` channels_last and contiguous
+in alternating blocks, so machine drift hits both alike, and prints ms per training frame, each
+format's ratio to the first, and how far the two losses apart after the same steps (the same
+arithmetic in another order: they agree to float rounding).
+
+    .venv/bin/python tools/train_step_bench.py [--data data/val4] [--model edge/models/default.pt]
+        [--steps 40] [--block 5] [--batch-size 16] [--threads 2]
+
+Without --data (or when it is missing) the frames are the benchmark's seeded synthetic ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--data", default="data/val4", help="simulated MCAP folder (default %(default)s)")
+    p.add_argument("--frames", type=int, default=256, help="frames loaded from --data (default %(default)s)")
+    p.add_argument("--model", default=str(ROOT / "edge" / "models" / "default.pt"),
+                   help="checkpoint whose architecture is timed (its weights are not used)")
+    p.add_argument("--steps", type=int, default=40, help="timed steps per format (default %(default)s)")
+    p.add_argument("--warmup", type=int, default=3, help="untimed steps per format first (default %(default)s)")
+    p.add_argument("--block", type=int, default=5, help="consecutive steps of one format per turn")
+    p.add_argument("--batch-size", type=int, default=16)
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+
+    import torch
+
+    from edge.train.checkpoint import checkpoint_meta, read_checkpoint
+    from edge.train.data import FrameSet, load_frames, make_batch
+    from edge.train.distributed import Dist
+    from edge.train.loop import MEMORY_FORMATS
+    from edge.train.model import build_model
+
+    torch.set_num_threads(args.threads)
+    meta = checkpoint_meta(args.model, read_checkpoint(args.model))
+    if Path(args.data).exists():
+        fs = load_frames([args.data], limit=args.frames)
+        source = f"{len(fs)} frames of {args.data}"
+    else:
+        from edge.sampleframes import synthetic_frames
+
+        sample = synthetic_frames(args.frames, seed=args.seed)
+        fs = FrameSet(np.nan_to_num(np.stack(sample.depth)).astype(np.float32), np.stack(sample.label).astype(np.uint8))
+        source = f"{len(fs)} synthetic frames (seed {args.seed})"
+    dist = Dist()
+    rng = np.random.default_rng(args.seed)
+    total = args.warmup + args.steps
+    batches = [rng.choice(len(fs), args.batch_size, replace=len(fs) < args.batch_size) for _ in range(total)]
+    runs = {}
+    for name, fmt in MEMORY_FORMATS.items():
+        torch.manual_seed(args.seed)
+        model = build_model(meta).to(memory_format=fmt).train()
+        runs[name] = {"fmt": fmt, "model": model, "opt": torch.optim.Adam(model.parameters(), lr=1e-3),
+                      "times": [], "loss": float("nan"), "done": 0}
+
+    def step(r: dict, k: int) -> None:
+        x, t, m = dist.local(make_batch(fs, batches[k], meta, np.random.default_rng([args.seed, k])))
+        t0 = time.perf_counter()
+        loss, lv = dist.loss(r["model"](x.contiguous(memory_format=r["fmt"])), t, m)
+        r["opt"].zero_grad(set_to_none=True)
+        loss.backward()
+        r["opt"].step()
+        if k >= args.warmup:
+            r["times"].append(time.perf_counter() - t0)
+        r["loss"] = lv
+
+    while any(r["done"] < total for r in runs.values()):
+        for r in runs.values():
+            for _ in range(args.block):
+                if r["done"] < total:
+                    step(r, r["done"])
+                    r["done"] += 1
+    print(f"torch {torch.__version__}, {args.threads} threads; {source}; architecture of {args.model} "
+          f"({meta.encoder} x{meta.width:g}, {meta.in_channels} ch + cues {list(meta.cues)}); batch {args.batch_size}, "
+          f"{args.steps} timed steps per format after {args.warmup} warm-up, alternating blocks of {args.block}")
+    print("step = forward + backward + Adam, per training frame; the batch preparation (same for both) is not included")
+    first = None
+    print(f"{'memory format':<14} {'p50 ms/frame':>12} {'mean':>7} {'min':>7} {'x first':>8} {'last loss':>10}")
+    for name, r in runs.items():
+        a = np.asarray(r["times"]) * 1000 / args.batch_size
+        first = first or float(np.median(a))
+        print(f"{name:<14} {np.median(a):>12.2f} {a.mean():>7.2f} {a.min():>7.2f} {np.median(a) / first:>8.2f} "
+              f"{r['loss']:>10.5f}")
+    losses = [r["loss"] for r in runs.values()]
+    print(f"loss after {total} identical steps differs by {abs(losses[0] - losses[1]):.2e} (float rounding)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
