@@ -1,0 +1,24 @@
+"""tools/train_step_bench.py: both layouts run the same steps and are reported side by side."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "train_step_bench.py"
+
+
+def test_both_memory_formats_are_timed_and_their_losses_agree(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("train_step_bench", TOOL)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    argv = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "2", "--warmup", "0",
+            "--block", "1", "--batch-size", "2", "--threads", "1"]
+    assert mod.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "4 synthetic frames (seed 0)" in out
+    rows = {line.split()[0]: line.split() for line in out.splitlines() if line.startswith(("channels_last", "contiguous"))}
+    assert set(rows) == {"channels_last", "contiguous"}
+    assert rows["channels_last"][4] == "1.00"  # the first format is the reference of the ratio column
+    diff = float(out.rsplit("differs by ", 1)[1].split()[0])
+    assert diff < 1e-3  # two steps of the same batches: the same loss to rounding
