@@ -20,6 +20,10 @@
 #    and keeping an exponential moving average of the weights (--ema 0.999, ~1,000 steps),
 # 3. install the best weights as the default and export the single-channel ONNX model (first-conv
 #    weights summed over the three depth channels; the height channel's weights kept).
+# Since 2026-12-02 depthseg-train keeps weights and inputs channels-last (--memory-format
+# channels_last, its default): the same arithmetic in another order, 2.2-2.3x faster steps on this
+# CPU (BENCHMARKS.md, "a training step in channels-last layout"). The shipped v12 was trained in
+# the old NCHW layout; FLAGS="--memory-format contiguous" reruns exactly that (and takes ~2x as long).
 # The test set used for the README numbers is simulated separately from seed 2 (never trained on).
 set -euo pipefail
 cd "$(dirname "$0")/.."
