@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Recipe of the shipped default model (edge/models/default.pt and default.onnx).
 #
-#   bash tools/train_default.sh            # ~60 min on a 2-core machine (v12, 2026-12-01: training 54.8 min, export < 1 min, the simulation of 24,000 frames ~3.3 min); BENCHMARKS.md ("Issue 9: candidate v12, 24,000 frames")
+#   bash tools/train_default.sh            # ~60 min on a 2-core machine (v12 in NCHW, 2026-12-01: training 54.8 min, export < 1 min, the simulation of 24,000 frames ~3.3 min); channels-last (now): 49 min + ~3.3 min simulation on 2026-12-02 (candidate v16); BENCHMARKS.md ("Issue 9: candidate v12, 24,000 frames", "candidate v16")
 #
 # 1. simulate 24,000 labelled frames (seed 1; 4 camera views of each of 6,000 settled scenes, which
 #    makes ~100 frames/s with 2 workers) with the pico flexx sensor model, wider domain
