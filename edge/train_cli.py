@@ -83,8 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
                    "under torchrun give each process its share of the cores)")
     t.add_argument("--memory-format", default="channels_last", choices=("channels_last", "contiguous"),
-                   help="layout of weights and inputs while training (default %(default)s: NHWC, 2-2.6x faster "
-                   "steps on a CPU; checkpoints are stored in the usual layout either way)")
+                   help="layout of weights and inputs while training (default %(default)s: NHWC, 2.2-2.3x faster "
+                   "steps on this CPU; checkpoints are stored in the usual layout either way)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     return p

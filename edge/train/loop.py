@@ -18,9 +18,9 @@ Differences from the paper, and why:
   masked BCE, comparable across runs with and without it.
 - ``memory_format`` "channels_last" (the default): weights and inputs are kept channels-last
   (NHWC) on the CPU. Why: the compact models have 8-64 channels at up to full resolution, where
-  oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step 2.2-2.6x
-  faster on this machine with the same arithmetic (BENCHMARKS.md, "Training step: memory
-  format"; `tools/train_step_bench.py`). "contiguous" is the old layout, kept to compare.
+  oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step 2.2-2.3x
+  faster on this machine with the same arithmetic (BENCHMARKS.md, "Issue 9: a training step in
+  channels-last layout"; `tools/train_step_bench.py`). "contiguous" is the old layout, kept to compare.
   Checkpoints are written contiguous either way, so nothing downstream sees the difference.
 """
 
