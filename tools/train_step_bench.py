@@ -1,17 +1,19 @@
 #!/usr/bin/env python
-"""Time training steps of one architecture in each memory format, interleaved, on this CPU.
+"""Time training steps of one architecture in each memory format and precision, interleaved, on this CPU.
 
 Why: the retraining recipe has a 60-minute budget on 2 cores (issue 9), and the step (forward,
 backward, Adam) is nearly all of an epoch. The compact models have 8-64 channels at up to full
 resolution, where the layout of weights and inputs decides the speed of oneDNN's convolutions.
 This tool runs the training loop's own pieces (`edge.train.data.make_batch`,
 `edge.train.distributed.Dist.loss`, Adam) with ``--memory-format`` channels_last and contiguous
-in alternating blocks, so machine drift hits both alike, and prints ms per training frame, each
-format's ratio to the first, and how far the two losses apart after the same steps (the same
-arithmetic in another order: they agree to float rounding).
+in alternating blocks, and with ``--precision bf16`` (bfloat16 autocast of the forward pass,
+channels-last), so machine drift hits all alike, and prints ms per training frame, each variant's
+ratio to the first, and how far the losses are apart after the same steps (the two float32
+layouts are the same arithmetic in another order and agree to float rounding; bf16 agrees to
+~0.1 %).
 
     .venv/bin/python tools/train_step_bench.py [--data data/val4] [--model edge/models/default.pt]
-        [--steps 40] [--block 5] [--batch-size 16] [--threads 2]
+        [--steps 40] [--block 5] [--batch-size 16] [--threads 2] [--variants channels_last contiguous bf16]
 
 Without --data (or when it is missing) the frames are the benchmark's seeded synthetic ones.
 """
@@ -29,6 +31,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+# variant -> (depthseg-train --memory-format, --precision)
+VARIANTS = {"channels_last": ("channels_last", "fp32"), "contiguous": ("contiguous", "fp32"),
+            "bf16": ("channels_last", "bf16")}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", default="data/val4", help="simulated MCAP folder (default %(default)s)")
@@ -41,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--batch-size", type=int, default=16)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS),
+                   help="what to time, in this order; the first is the reference of the ratio column "
+                   "(default: all: %(default)s)")
     args = p.parse_args(argv)
 
     import torch
@@ -48,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     from edge.train.checkpoint import checkpoint_meta, read_checkpoint
     from edge.train.data import FrameSet, load_frames, make_batch
     from edge.train.distributed import Dist
-    from edge.train.loop import MEMORY_FORMATS
+    from edge.train.loop import MEMORY_FORMATS, TrainConfig
     from edge.train.model import build_model
 
     torch.set_num_threads(args.threads)
@@ -67,16 +77,21 @@ def main(argv: list[str] | None = None) -> int:
     total = args.warmup + args.steps
     batches = [rng.choice(len(fs), args.batch_size, replace=len(fs) < args.batch_size) for _ in range(total)]
     runs = {}
-    for name, fmt in MEMORY_FORMATS.items():
+    for name in dict.fromkeys(args.variants):
+        mf, precision = VARIANTS[name]
+        fmt = MEMORY_FORMATS[mf]
         torch.manual_seed(args.seed)
         model = build_model(meta).to(memory_format=fmt).train()
         runs[name] = {"fmt": fmt, "model": model, "opt": torch.optim.Adam(model.parameters(), lr=1e-3),
-                      "times": [], "loss": float("nan"), "done": 0}
+                      "autocast": TrainConfig(memory_format=mf, precision=precision).autocast,
+                      "precision": precision, "times": [], "loss": float("nan"), "done": 0}
 
     def step(r: dict, k: int) -> None:
         x, t, m = dist.local(make_batch(fs, batches[k], meta, np.random.default_rng([args.seed, k])))
         t0 = time.perf_counter()
-        loss, lv = dist.loss(r["model"](x.contiguous(memory_format=r["fmt"])), t, m)
+        with r["autocast"]():
+            logits = r["model"](x.contiguous(memory_format=r["fmt"]))
+        loss, lv = dist.loss(logits.float(), t, m)  # as edge.train.loop does
         r["opt"].zero_grad(set_to_none=True)
         loss.backward()
         r["opt"].step()
@@ -93,16 +108,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"torch {torch.__version__}, {args.threads} threads; {source}; architecture of {args.model} "
           f"({meta.encoder} x{meta.width:g}, {meta.in_channels} ch + cues {list(meta.cues)}); batch {args.batch_size}, "
           f"{args.steps} timed steps per format after {args.warmup} warm-up, alternating blocks of {args.block}")
-    print("step = forward + backward + Adam, per training frame; the batch preparation (same for both) is not included")
+    print("step = forward + backward + Adam, per training frame; the batch preparation (the same for all) is not included")
     first = None
-    print(f"{'memory format':<14} {'p50 ms/frame':>12} {'mean':>7} {'min':>7} {'x first':>8} {'last loss':>10}")
+    print(f"{'variant':<14} {'p50 ms/frame':>12} {'mean':>7} {'min':>7} {'x first':>8} {'last loss':>10}")
     for name, r in runs.items():
         a = np.asarray(r["times"]) * 1000 / args.batch_size
         first = first or float(np.median(a))
         print(f"{name:<14} {np.median(a):>12.2f} {a.mean():>7.2f} {a.min():>7.2f} {np.median(a) / first:>8.2f} "
               f"{r['loss']:>10.5f}")
-    losses = [r["loss"] for r in runs.values()]
-    print(f"loss after {total} identical steps differs by {abs(losses[0] - losses[1]):.2e} (float rounding)")
+    fp32 = [r["loss"] for r in runs.values() if r["precision"] == "fp32"]
+    if len(fp32) == 2:
+        print(f"loss after {total} identical steps differs by {abs(fp32[0] - fp32[1]):.2e} between the layouts "
+              "(float rounding)")
+    if "bf16" in runs and fp32:
+        rel = abs(runs["bf16"]["loss"] / fp32[0] - 1)
+        print(f"the loss of bf16 after the same steps differs from float32's by {100 * rel:.2f} % (8-bit mantissa)")
     return 0
 
 

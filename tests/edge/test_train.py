@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -294,6 +296,33 @@ def test_channels_last_training_is_the_same_arithmetic_and_stores_the_usual_layo
     assert float(d.max()) <= 2 * 1e-3 * 2
     assert float(d.mean()) < 0.1 * 1e-3  # a tenth of one step on average
     assert all(v.is_contiguous() for v in last_cl["weight_average"]["state_dict"].values())
+
+
+def test_bf16_training_keeps_float32_weights_and_learns_about_as_fp32(tmp_path) -> None:
+    fs = _frames(12)
+    tr, va = fs.subset(np.arange(8)), fs.subset(np.arange(8, 12))
+    runs = {}
+    for prec in ("fp32", "bf16"):
+        cfg = TrainConfig(epochs=2, batch_size=4, lr=1e-3, seed=0, threads=1, ema=0.9, precision=prec)
+        res = train(META, tr, va, tmp_path / prec, cfg)
+        runs[prec] = (res.history, read_checkpoint(tmp_path / prec / "best.pt"), read_checkpoint(tmp_path / prec / "last.pt"))
+    (h16, best16, last16), (h32, _, _) = runs["bf16"], runs["fp32"]
+    assert all(math.isfinite(r["train_loss"]) and math.isfinite(r["val_loss"]) for r in h16)
+    # bfloat16 keeps 8 bits of mantissa: the same losses to well within 1 % (0.08 % here), not to float rounding
+    for a, b in zip(h16, h32):
+        assert a["train_loss"] == pytest.approx(b["train_loss"], rel=0.01)
+        assert a["val_loss"] == pytest.approx(b["val_loss"], rel=0.01)
+    assert h16[-1]["train_loss"] < h16[0]["train_loss"] or h16[-1]["val_loss"] < h16[0]["val_loss"]
+    for blob in (best16, last16):
+        assert all(v.dtype == torch.float32 for v in blob["state_dict"].values() if v.dtype.is_floating_point)
+    assert all(v.dtype == torch.float32 for v in last16["weight_average"]["state_dict"].values()
+               if v.dtype.is_floating_point)
+    assert best16["meta"]["training"]["config"]["precision"] == "bf16"
+
+
+def test_an_unknown_precision_is_a_config_error() -> None:
+    with pytest.raises(ConfigError, match="precision must be one of fp32, bf16"):
+        TrainConfig(precision="fp16")
 
 
 def test_an_unknown_memory_format_is_a_config_error() -> None:

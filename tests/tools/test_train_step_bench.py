@@ -1,4 +1,4 @@
-"""tools/train_step_bench.py: both layouts run the same steps and are reported side by side."""
+"""tools/train_step_bench.py: both layouts and bf16 run the same steps and are reported side by side."""
 
 from __future__ import annotations
 
@@ -17,8 +17,25 @@ def test_both_memory_formats_are_timed_and_their_losses_agree(tmp_path, capsys):
     assert mod.main(argv) == 0
     out = capsys.readouterr().out
     assert "4 synthetic frames (seed 0)" in out
-    rows = {line.split()[0]: line.split() for line in out.splitlines() if line.startswith(("channels_last", "contiguous"))}
-    assert set(rows) == {"channels_last", "contiguous"}
-    assert rows["channels_last"][4] == "1.00"  # the first format is the reference of the ratio column
-    diff = float(out.rsplit("differs by ", 1)[1].split()[0])
+    rows = {line.split()[0]: line.split() for line in out.splitlines()
+            if line.startswith(("channels_last", "contiguous", "bf16"))}
+    assert set(rows) == {"channels_last", "contiguous", "bf16"}
+    assert rows["channels_last"][4] == "1.00"  # the first variant is the reference of the ratio column
+    diff = float(out.split("differs by ", 1)[1].split()[0])
     assert diff < 1e-3  # two steps of the same batches: the same loss to rounding
+    rel = float(out.split("differs from float32's by ", 1)[1].split()[0])
+    assert rel < 2.0  # bf16: the same loss to its 8-bit mantissa, in %
+
+
+def test_the_variants_chosen_are_the_ones_timed(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("train_step_bench", TOOL)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    argv = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "1", "--warmup", "0",
+            "--block", "1", "--batch-size", "2", "--threads", "1", "--variants", "bf16", "channels_last"]
+    assert mod.main(argv) == 0
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.startswith(("channels_last", "contiguous", "bf16"))]
+    assert [r[0] for r in rows] == ["bf16", "channels_last"]
+    assert rows[0][4] == "1.00"
+    assert "between the layouts" not in out  # one float32 variant: no layout pair to compare
