@@ -83,8 +83,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
                    "under torchrun give each process its share of the cores)")
     t.add_argument("--memory-format", default="channels_last", choices=("channels_last", "contiguous"),
-                   help="layout of weights and inputs while training (default %(default)s: NHWC, 2.2-2.3x faster "
-                   "steps on this CPU; checkpoints are stored in the usual layout either way)")
+                   help="layout of weights and inputs while training (default %(default)s: NHWC, 1.4-2.3x faster "
+                   "steps on the CPUs measured; checkpoints are stored in the usual layout either way)")
     t.add_argument("--precision", default="fp32", choices=("fp32", "bf16"),
                    help="of the training forward pass (default %(default)s); bf16 = bfloat16 autocast, ~1.4x faster "
                    "steps on CPUs with AMX (Intel Sapphire Rapids+), no faster elsewhere; weights, loss, "

@@ -21,9 +21,15 @@
 # 3. install the best weights as the default and export the single-channel ONNX model (first-conv
 #    weights summed over the three depth channels; the height channel's weights kept).
 # Since 2026-12-02 depthseg-train keeps weights and inputs channels-last (--memory-format
-# channels_last, its default): the same arithmetic in another order, 2.2-2.3x faster steps on this
-# CPU (BENCHMARKS.md, "a training step in channels-last layout"). The shipped v12 was trained in
-# the old NCHW layout; FLAGS="--memory-format contiguous" reruns exactly that (and takes ~2x as long).
+# channels_last, its default): the same arithmetic in another order, 2.2-2.3x faster steps on an
+# AMD EPYC, 1.4-1.6x on an Intel Xeon (BENCHMARKS.md, "a training step in channels-last layout").
+# The shipped v12 was trained in the old NCHW layout; FLAGS="--memory-format contiguous" reruns
+# exactly that (and takes 1.5-2x as long).
+# On a CPU with AMX (Intel Sapphire Rapids and later: `grep -c amx_bf16 /proc/cpuinfo`), use
+#   FLAGS="--precision bf16" bash tools/train_default.sh
+# bfloat16 autocast of the forward pass, ~1.4x faster steps there: 55.6 min for the whole recipe
+# from nothing on 2026-12-02 (candidate v17, held-out mean 97.18 against v12's 97.15, i.e. the
+# same model within seed noise), where float32 would take ~70 min; no faster on the AMD EPYC.
 # The test set used for the README numbers is simulated separately from seed 2 (never trained on).
 set -euo pipefail
 cd "$(dirname "$0")/.."

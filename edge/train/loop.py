@@ -19,7 +19,7 @@ Differences from the paper, and why:
 - ``memory_format`` "channels_last" (the default): weights and inputs are kept channels-last
   (NHWC) on the CPU. Why: the compact models have 8-64 channels at up to full resolution, where
   oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step 2.2-2.3x
-  faster on this machine with the same arithmetic (BENCHMARKS.md, "Issue 9: a training step in
+  faster on an AMD EPYC and 1.4-1.6x on an Intel Xeon (the two CPUs this ran on) with the same arithmetic (BENCHMARKS.md, "Issue 9: a training step in
   channels-last layout"; `tools/train_step_bench.py`). "contiguous" is the old layout, kept to compare.
   Checkpoints are written contiguous either way, so nothing downstream sees the difference.
 - ``precision`` "bf16" (optional; "fp32" the default): the training forward pass runs under
