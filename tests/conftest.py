@@ -9,7 +9,8 @@
   per session (an export costs seconds).
 
 Generators live in importable modules beside this file (``onnxgen``, ``replaygen``,
-``tinymodel``), so tests can also call them with other parameters; a package's own fixture may
+``tinymodel``), so tests can also call them with other parameters, and ``toolmod.load_tool``
+loads a script of ``tools/`` for its tests; a package's own fixture may
 be a thin alias of a shared one (another size, a stored threshold) and says why.
 """
 

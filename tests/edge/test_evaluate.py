@@ -331,11 +331,9 @@ def test_eval_blensor_tool(tiny_ckpt, capsys):
     blensor = SHARED / "data" / "blensor"
     if not (blensor / "scan_1.npy").exists():
         pytest.skip(f"BlenSor scans not found at {blensor}")
-    import importlib.util
+    from toolmod import load_tool
 
-    spec = importlib.util.spec_from_file_location("eval_blensor", ROOT / "tools" / "eval_blensor.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_tool("eval_blensor.py")
     assert mod.main(["--model", str(tiny_ckpt), "--data", str(blensor), "--json", "--baseline", "--threads", "1"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["frames"] == 9 and out["scans"] == [f"scan_{i}.npy" for i in range(1, 10)]

@@ -274,15 +274,23 @@ def test_simulated_views_of_one_scene_load_with_one_scene_number(tmp_path) -> No
     assert fs.subset(np.array([5, 0])).scene.tolist() == [2, 0]
 
 
-def test_channels_last_training_is_the_same_arithmetic_and_stores_the_usual_layout(tmp_path) -> None:
+def _train_each(tmp_path, epochs: int, option: str, values: tuple[str, ...]) -> dict[str, tuple]:
+    """One small training per value of a `TrainConfig` option, the rest alike: {value: (history, best, last)}."""
     fs = _frames(12)
     tr, va = fs.subset(np.arange(8)), fs.subset(np.arange(8, 12))
     runs = {}
-    for fmt in ("channels_last", "contiguous"):
-        cfg = TrainConfig(epochs=1, batch_size=4, lr=1e-3, seed=0, threads=1, ema=0.9, memory_format=fmt)
-        res = train(META, tr, va, tmp_path / fmt, cfg)
-        runs[fmt] = (res.history[0], read_checkpoint(tmp_path / fmt / "best.pt"), read_checkpoint(tmp_path / fmt / "last.pt"))
+    for value in values:
+        cfg = TrainConfig(epochs=epochs, batch_size=4, lr=1e-3, seed=0, threads=1, ema=0.9, **{option: value})
+        res = train(META, tr, va, tmp_path / value, cfg)
+        runs[value] = (res.history, read_checkpoint(tmp_path / value / "best.pt"),
+                       read_checkpoint(tmp_path / value / "last.pt"))
+    return runs
+
+
+def test_channels_last_training_is_the_same_arithmetic_and_stores_the_usual_layout(tmp_path) -> None:
+    runs = _train_each(tmp_path, 1, "memory_format", ("channels_last", "contiguous"))
     (h_cl, best_cl, last_cl), (h_c, best_c, _) = runs["channels_last"], runs["contiguous"]
+    h_cl, h_c = h_cl[0], h_c[0]
     assert h_cl["train_loss"] == pytest.approx(h_c["train_loss"], rel=1e-4)
     assert h_cl["val_loss"] == pytest.approx(h_c["val_loss"], rel=1e-4)
     diffs = []
@@ -299,13 +307,7 @@ def test_channels_last_training_is_the_same_arithmetic_and_stores_the_usual_layo
 
 
 def test_bf16_training_keeps_float32_weights_and_learns_about_as_fp32(tmp_path) -> None:
-    fs = _frames(12)
-    tr, va = fs.subset(np.arange(8)), fs.subset(np.arange(8, 12))
-    runs = {}
-    for prec in ("fp32", "bf16"):
-        cfg = TrainConfig(epochs=2, batch_size=4, lr=1e-3, seed=0, threads=1, ema=0.9, precision=prec)
-        res = train(META, tr, va, tmp_path / prec, cfg)
-        runs[prec] = (res.history, read_checkpoint(tmp_path / prec / "best.pt"), read_checkpoint(tmp_path / prec / "last.pt"))
+    runs = _train_each(tmp_path, 2, "precision", ("fp32", "bf16"))
     (h16, best16, last16), (h32, _, _) = runs["bf16"], runs["fp32"]
     assert all(math.isfinite(r["train_loss"]) and math.isfinite(r["val_loss"]) for r in h16)
     # bfloat16 keeps 8 bits of mantissa: the same losses to well within 1 % (0.08 % here), not to float rounding

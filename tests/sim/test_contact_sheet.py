@@ -2,24 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+from toolmod import load_tool
 
 from edge.io import FrameWriter
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "contact_sheet.py"
 
 
 @pytest.fixture(scope="module")
 def cs():
-    spec = importlib.util.spec_from_file_location("contact_sheet", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("contact_sheet.py")
 
 
 def _recording(path: Path, n: int = 5) -> Path:

@@ -2,23 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
+from toolmod import load_tool
 
 from sim.shapes import MeshLibrary
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "household_meshes.py"
 
 
 @pytest.fixture(scope="module")
 def hh():
-    spec = importlib.util.spec_from_file_location("household_meshes", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("household_meshes.py")
 
 
 def test_every_kind_is_written_and_loads_in_the_simulator(hh, tmp_path):

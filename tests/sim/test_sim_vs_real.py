@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from toolmod import load_tool
 
 ROOT = Path(__file__).resolve().parents[2]
 REAL = ROOT.parent / "shared" / "data" / "royale" / "royale_20200513_203219_0.ply"
@@ -15,10 +15,7 @@ REAL = ROOT.parent / "shared" / "data" / "royale" / "royale_20200513_203219_0.pl
 
 @pytest.fixture(scope="module")
 def tool():
-    spec = importlib.util.spec_from_file_location("sim_vs_real", ROOT / "tools" / "sim_vs_real.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("sim_vs_real.py")
 
 
 @pytest.mark.slow

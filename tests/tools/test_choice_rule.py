@@ -2,25 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
-
-ABLATION = Path(__file__).resolve().parents[2] / "tools" / "ablation"
+from toolmod import load_tool
 
 
 @pytest.fixture(scope="module")
 def ea():
-    sys.path.insert(0, str(ABLATION))  # the script imports its neighbour heldout.py as a top-level module
-    try:
-        spec = importlib.util.spec_from_file_location("eval_ablation", ABLATION / "eval_ablation.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-    finally:
-        sys.path.remove(str(ABLATION))
-    return mod
+    return load_tool("ablation/eval_ablation.py")  # imports its neighbour heldout.py: load_tool allows it
 
 
 def test_a_lead_inside_seed_noise_does_not_replace_the_default(ea):

@@ -2,21 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
+from toolmod import load_tool
 
 from edge.io.writer import FrameWriter
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "height_cue_frame.py"
-
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("height_cue_frame", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_tool("height_cue_frame.py")
 
 
 def test_a_frame_where_the_floor_outweighs_the_table_is_flagged(tmp_path, capsys):

@@ -2,16 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "train_step_bench.py"
+from toolmod import load_tool
 
 
 def test_both_memory_formats_are_timed_and_their_losses_agree(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("train_step_bench", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_tool("train_step_bench.py")
     argv = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "2", "--warmup", "0",
             "--block", "1", "--batch-size", "2", "--threads", "1"]
     assert mod.main(argv) == 0
@@ -28,9 +23,7 @@ def test_both_memory_formats_are_timed_and_their_losses_agree(tmp_path, capsys):
 
 
 def test_the_variants_chosen_are_the_ones_timed(tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("train_step_bench", TOOL)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_tool("train_step_bench.py")
     argv = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "1", "--warmup", "0",
             "--block", "1", "--batch-size", "2", "--threads", "1", "--variants", "bf16", "channels_last"]
     assert mod.main(argv) == 0
