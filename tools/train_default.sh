@@ -29,7 +29,8 @@
 #   FLAGS="--precision bf16" bash tools/train_default.sh
 # bfloat16 autocast of the forward pass, ~1.4x faster steps there: 55.6 min for the whole recipe
 # from nothing on 2026-12-02 (candidate v17, held-out mean 97.18 against v12's 97.15, i.e. the
-# same model within seed noise), where float32 would take ~70 min; no faster on the AMD EPYC.
+# same model within seed noise), where float32 would take ~72 min (estimated from the step
+# ratio); no faster on the AMD EPYC.
 # The test set used for the README numbers is simulated separately from seed 2 (never trained on).
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -18,9 +18,10 @@ Differences from the paper, and why:
   masked BCE, comparable across runs with and without it.
 - ``memory_format`` "channels_last" (the default): weights and inputs are kept channels-last
   (NHWC) on the CPU. Why: the compact models have 8-64 channels at up to full resolution, where
-  oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step 2.2-2.3x
-  faster on an AMD EPYC and 1.4-1.6x on an Intel Xeon (the two CPUs this ran on) with the same arithmetic (BENCHMARKS.md, "Issue 9: a training step in
-  channels-last layout"; `tools/train_step_bench.py`). "contiguous" is the old layout, kept to compare.
+  oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step
+  2.2-2.3x faster on an AMD EPYC and 1.4-1.6x on an Intel Xeon (the two CPUs measured) with the
+  same arithmetic (BENCHMARKS.md, "Issue 9: a training step in channels-last layout";
+  `tools/train_step_bench.py`). "contiguous" is the old layout, kept to compare.
   Checkpoints are written contiguous either way, so nothing downstream sees the difference.
 - ``precision`` "bf16" (optional; "fp32" the default): the training forward pass runs under
   bfloat16 autocast on the CPU; weights, the optimizer, the weight average, the loss, validation
@@ -96,7 +97,6 @@ class TrainConfig:
             raise ConfigError(
                 f"memory format must be one of {', '.join(MEMORY_FORMATS)}, got '{self.memory_format}'"
             )
-
         if self.precision not in PRECISIONS:
             raise ConfigError(f"precision must be one of {', '.join(PRECISIONS)}, got '{self.precision}'")
 
