@@ -8,10 +8,6 @@ from toolmod import load_tool
 from edge.io.writer import FrameWriter
 
 
-def _tool():
-    return load_tool("height_cue_frame.py")
-
-
 def test_a_frame_where_the_floor_outweighs_the_table_is_flagged(tmp_path, capsys):
     h, w = 64, 80
     table = np.full((h, w), 0.30, np.float32)
@@ -25,8 +21,9 @@ def test_a_frame_where_the_floor_outweighs_the_table_is_flagged(tmp_path, capsys
     with FrameWriter(path) as fw:
         fw.write(0, table, label)
         fw.write(1, edge, edge_label)
-    assert _tool().main([str(path)]) == 0
+    tool = load_tool("height_cue_frame.py")
+    assert tool.main([str(path)]) == 0
     out = capsys.readouterr().out
     assert "1 of 2 frames" in out and ": 1 (" in out
-    assert _tool().main([str(path), "1"]) == 0
+    assert tool.main([str(path), "1"]) == 0
     assert "frame 1: plane fit ok=True" in capsys.readouterr().out
