@@ -32,6 +32,7 @@ from edge.meta import ModelMeta
 from edge.metrics import predict_mask
 from edge.preprocess import padded_shape, preprocess, preprocess_for
 from edge.train.model import FCN8s
+from export.fold import folded
 
 __all__ = [
     "OPSET",
@@ -113,14 +114,20 @@ def export_onnx(
     *,
     dynamic_hw: bool = True,
     extra_props: dict[str, str] | None = None,
+    fold: bool = True,
 ) -> Path:
-    """Export ``model`` (any in_channels) to ``out``: named I/O, dynamic shapes, metadata."""
+    """Export ``model`` (any in_channels) to ``out``: named I/O, dynamic shapes, metadata.
+
+    ``fold``: the affine head as two matrix products (`export.fold`, the same function, faster
+    on the edge); False writes the layers as trained (for measuring what the fold buys).
+    """
     import onnx
 
-    model = model.eval()
+    model = folded(model.eval()) if fold else model.eval()
     s = meta.sensor
     hp, wp = padded_shape(s.height, s.width, meta.pad_multiple)
-    example = torch.zeros(1, meta.net_channels, hp, wp)
+    # two example frames: with one, torch.export specialises the batch to 1 (the head's MatMul broadcasts)
+    example = torch.zeros(2, meta.net_channels, hp, wp)
     dims: dict[int, object] = {0: torch.export.Dim("batch", min=1, max=1024)}
     if dynamic_hw:
         dims[2] = 32 * torch.export.Dim("h32", min=1, max=128)

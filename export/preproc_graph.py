@@ -62,6 +62,7 @@ from edge.io import atomic_path
 from edge.meta import ModelMeta
 from edge.preprocess import ROBUST_CLIP, STD_FLOOR, padded_shape
 from edge.train.model import FCN8s
+from export.fold import folded
 from export.onnx_export import OPSET, export_props, quiet_export, set_metadata, torch_logits, write_onnx
 
 __all__ = [
@@ -388,7 +389,7 @@ class EdgeGraph(nn.Module):
         super().__init__()
         check_supported(meta, model)
         self.pre = PreprocGraph(meta)
-        self.model = model.eval()
+        self.model = folded(model.eval())  # the affine head as two matrix products (export.fold)
         self.h, self.w = meta.sensor.height, meta.sensor.width
 
     def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -45,6 +45,15 @@ class FCN8s(nn.Module):
             self.full_proj = nn.Conv2d(ch["conv1"], dec[-1], kernel_size=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(*self.decode(x))
+
+    def decode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Everything up to the linear head: (the last deconvolution after its ReLU, the conv1 map).
+
+        Why split here: what follows (the last BatchNorm, the full-resolution projection, the
+        add and the 1x1 classifier) is affine, so the export folds it into one linear map per
+        input (`export.fold`); the conv1 map is None without ``full_skip``.
+        """
         h, w = x.shape[-2:]
         if h % 32 or w % 32:
             hp, wp = -(-h // 32) * 32, -(-w // 32) * 32
@@ -54,12 +63,21 @@ class FCN8s(nn.Module):
         if self.extra_skip:
             skips.update({2: "pool2", 3: "pool1"})
         s = f["pool5"]
+        last = len(self.deconvs) - 1
         for i, (deconv, bn) in enumerate(zip(self.deconvs, self.bns)):
-            s = bn(self.relu(deconv(s)))
+            s = self.relu(deconv(s))
+            if i == last:
+                break
+            s = bn(s)
             if i in skips:
                 s = s + f[skips[i]]
-        if self.full_skip:
-            s = s + self.full_proj(f["conv1"])
+        return s, (f["conv1"] if self.full_skip else None)
+
+    def head(self, r: torch.Tensor, conv1: torch.Tensor | None) -> torch.Tensor:
+        """Logits from `decode`'s two maps: last BatchNorm, (+ projected conv1), 1x1 classifier."""
+        s = self.bns[-1](r)
+        if conv1 is not None:
+            s = s + self.full_proj(conv1)
         return self.classifier(s)
 
 
