@@ -31,6 +31,7 @@ examples:
   depthseg-bench --model a.onnx b.onnx --runs 500 --json
   depthseg-bench --model a.onnx --torch                        # also PyTorch eager (imports torch; <= 50 runs)
   depthseg-bench --threads 1 2                                 # the default model at 1 and at 2 threads, interleaved
+  depthseg-bench --rate 45                                     # frames paced as the sensor delivers them at 45 Hz
 """
 
 
@@ -53,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--block", type=int, default=None,
                    help="consecutive timed runs of one model before the next takes its turn (default 10: each model "
                         "times with warm caches, as it runs alone on the robot; 1: models alternate every frame)")
+    p.add_argument("--rate", type=float, default=0.0, metavar="HZ",
+                   help="start the timed frames 1/HZ s apart, as the sensor delivers them (e.g. 45, the pico flexx's "
+                        "top rate; default 0: back to back, the best case: idle cores between frames are slower)")
     p.add_argument("--frames", type=int, default=8, help="distinct frames, cycled through the runs (default 8)")
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic frames (default 0)")
     p.add_argument("--spin", action="store_true",
@@ -105,7 +109,8 @@ def format_report(res: dict[str, Any]) -> str:
         f"thread spinning {'on' if res['spin'] else 'off'}",
         f"CPU: {cpu['model']} ({cpu['usable_cpus']} usable of {cpu['logical_cpus']} logical CPUs); ISA: {' '.join(cpu['isa'])}",
         f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin"
-        + (f" in blocks of {res['block']} runs" if res.get("block", 1) > 1 else " (models alternate every frame)"),
+        + (f" in blocks of {res['block']} runs" if res.get("block", 1) > 1 else " (models alternate every frame)")
+        + (f", paced at {res['rate_hz']:g} frames/s" if res.get("rate_hz") else ", back to back"),
         "times in ms; 'inf' = session.run only; 'frame' = raw depth -> mask (pre + inf + post); fps = 1000 / mean frame ms; "
         "'x first' = frame p50 / the first model's",
     ]
@@ -128,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             res = benchmark(args.model, compare=args.compare, threads=args.threads if len(args.threads) > 1 else args.threads[0], runs=args.runs,
                             warmup=args.warmup, data=args.data, frames=args.frames, seed=args.seed, spin=args.spin,
-                            torch=args.torch, block=args.block, on_round=lambda _r: bar.update(1))
+                            torch=args.torch, block=args.block, rate=args.rate, on_round=lambda _r: bar.update(1))
         finally:
             bar.close()
         if args.json:

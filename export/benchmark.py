@@ -44,6 +44,7 @@ def benchmark(
     torch: bool = False,
     on_round: Callable[[int], None] | None = None,
     block: int | None = None,
+    rate: float | None = None,
 ) -> dict[str, Any]:
     """Time models round-robin on this CPU (`edge.bench.bench_models`); the ``depthseg-bench --json`` object.
 
@@ -62,16 +63,26 @@ def benchmark(
         on_round: called with the run index after each run of every model (progress).
         block: consecutive timed runs of one model before the next takes its turn (None:
             `edge.bench.DEFAULT_BLOCK`; see `edge.bench.bench_models`).
+        rate: pace the timed frames at this many frames/s, as the sensor delivers them (None
+            or 0: back to back).
 
     Returns:
-        ``cpu``, ``runtime``, ``threads``, ``runs``, ``warmup``, ``frames`` (their source), ``peak_rss_mb``,
+        ``cpu``, ``runtime``, ``threads``, ``runs``, ``warmup``, ``rate_hz``, ``frames`` (their source), ``peak_rss_mb``,
         ``models`` (one dict per model: latencies, frames/s, size, ratio to the first...).
 
     Raises:
-        ConfigError: threads or frames below 1, or a bad ``compare`` item.
+        ConfigError: threads or frames below 1, a rate below 0, or a bad ``compare`` item.
         ModelError: a model file is missing or unreadable.
     """
-    from edge.bench import ModelSpec, bench_models, check_block, cpu_info, peak_rss_mb, runtime_info
+    from edge.bench import (
+        ModelSpec,
+        bench_models,
+        check_block,
+        check_rate,
+        cpu_info,
+        peak_rss_mb,
+        runtime_info,
+    )
     from edge.cliutil import require
     from edge.defaults import resolve_model
     from edge.io.paths import check_input_file
@@ -83,6 +94,7 @@ def benchmark(
     if frames < 1:
         raise ConfigError(f"`frames` must be >= 1, got {frames}")
     block = check_block(block)  # before the exports of `compare`, which take seconds
+    rate = check_rate(rate)
     archs = [parse_compare(c) for c in compare]
     for m in models or ():
         check_input_file(m, "model")  # a FIFO would block onnxruntime's read forever
@@ -104,7 +116,7 @@ def benchmark(
         suffix = (lambda t: f" t{t}") if len(counts) > 1 else (lambda t: "")
         specs = [ModelSpec(p, name=name + suffix(t), threads=t) for p, name in named for t in counts]
         results = bench_models(specs, sample.depth, runs=runs, warmup=warmup, spin=spin, on_round=on_round,
-                               block=block)
+                               block=block, rate=rate)
         if torch:
             from edge.infer import Segmenter
             from edge.train.timing import time_torch
@@ -121,6 +133,7 @@ def benchmark(
         "runs": runs,
         "warmup": warmup,
         "block": block,
+        "rate_hz": rate,
         "frames": sample.source,
         "peak_rss_mb": peak_rss_mb(),
         "models": results,

@@ -177,3 +177,39 @@ def test_cli_times_every_model_at_each_thread_count(models, capsys):
     assert res["threads"] == [1, 2] and res["block"] == 10
     assert main(["--model", str(models[0]), "--threads", "2", "2"]) == 2  # counts must be distinct
     assert "distinct" in capsys.readouterr().err
+
+
+def test_rate_paces_the_timed_frames_like_a_sensor(models, monkeypatch):
+    # with --rate the timed frames start 1/rate s apart (a sensor's period), whatever each one takes
+    from edge import bench
+    from edge.infer import Segmenter
+
+    plain, _raw = models
+    starts: list[float] = []
+    original = Segmenter.predict
+
+    def predict(self, depth, threshold=None):
+        starts.append(bench.time.perf_counter())
+        return original(self, depth, threshold)
+
+    monkeypatch.setattr(Segmenter, "predict", predict)
+    res = bench_models([ModelSpec(plain, threads=1)], synthetic_frames(2).depth, runs=6, warmup=0, rate=50.0)
+    gaps = np.diff(starts[1:])  # after the untimed first run
+    assert len(gaps) == 5 and gaps.min() >= 0.02 - 1e-4  # 50 Hz: 20 ms between frame starts
+    assert res[0]["rate_hz"] == 50.0
+    starts.clear()
+    assert bench_models([ModelSpec(plain, threads=1)], synthetic_frames(2).depth, runs=3, warmup=0)[0]["rate_hz"] is None
+    for bad in (-1.0, float("nan"), float("inf")):
+        with pytest.raises(ConfigError, match="rate"):
+            bench_models([ModelSpec(plain, threads=1)], synthetic_frames(1).depth, runs=2, rate=bad)
+
+
+def test_cli_rate_is_reported_and_a_negative_rate_is_one_line(models, capsys):
+    rc = main(["--model", str(models[0]), "--runs", "2", "--warmup", "0", "--rate", "100", "--json"])
+    assert rc == 0, capsys.readouterr().err
+    assert json.loads(capsys.readouterr().out)["rate_hz"] == 100.0
+    assert main(["--model", str(models[0]), "--runs", "2", "--rate", "100"]) == 0
+    assert "paced at 100 frames/s" in capsys.readouterr().out
+    assert main(["--model", str(models[0]), "--rate", "-5"]) == 2
+    err = capsys.readouterr().err
+    assert "rate" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
