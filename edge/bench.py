@@ -12,9 +12,9 @@ Why it is built like this:
   model's frames 1.26x slower (4.29 vs 3.41 ms p50, one run each, BENCHMARKS.md), which measures
   the benchmark, not the model. Drift on the scale of seconds still hits all models alike.
 - Back-to-back frames are the best case. A sensor delivers a frame every 1/rate s and the CPU
-  idles in between; on the 2-vCPU Xeon of 2026-12-02 inference took 3.8 ms paced at 45 Hz
-  against 2.5 ms back to back (cold caches, sleeping cores: BENCHMARKS.md). ``rate`` paces the
-  timed frames like the sensor, so the number is the one the robot sees.
+  idles in between; on the 2-vCPU Xeon of 2026-12-02 the shipped model's inference took
+  3.7-3.8 ms paced at 45 Hz against 2.8 ms back to back (cold caches, sleeping cores:
+  BENCHMARKS.md). ``rate`` paces the timed frames like the sensor: the number the robot sees.
 - Session load and the first run are reported on their own (the first run allocates and
   plans); percentiles come from the timed runs after warm-up only.
 - The CPU model, its ISA flags, the onnxruntime version and the thread settings are recorded
