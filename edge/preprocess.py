@@ -35,6 +35,7 @@ __all__ = [
     "standardize",
     "padded_shape",
     "preprocess",
+    "input_options",
     "preprocess_batch",
     "preprocess_for",
     "preprocess_batch_for",
@@ -176,20 +177,24 @@ def preprocess(
     return Preprocessed(x=x, valid=valid, mean=mean, std=std)
 
 
-def _options(meta) -> dict:
-    """Everything a model's `edge.meta.ModelMeta` says about its input, as `preprocess` arguments."""
+def input_options(meta) -> dict:
+    """Everything a model's `edge.meta.ModelMeta` says about its input, as `preprocess` arguments.
+
+    Args:
+        meta: the model's metadata (`edge.meta.ModelMeta`).
+    """
     return {"channels": meta.in_channels, "multiple": meta.pad_multiple, "standardize_mode": meta.standardize,
             "cues": tuple(meta.cues), "max_range_m": meta.sensor.max_range_m}
 
 
 def preprocess_for(depth: np.ndarray, meta) -> Preprocessed:
     """`preprocess` with everything a model's `edge.meta.ModelMeta` says about its input."""
-    return preprocess(depth, **_options(meta))
+    return preprocess(depth, **input_options(meta))
 
 
 def preprocess_batch_for(frames: list[np.ndarray], meta) -> tuple[np.ndarray, np.ndarray]:
     """`preprocess_batch` with everything a model's `edge.meta.ModelMeta` says about its input."""
-    return preprocess_batch(frames, **_options(meta))
+    return preprocess_batch(frames, **input_options(meta))
 
 
 def preprocess_batch(

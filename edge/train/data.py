@@ -1,9 +1,11 @@
-"""Labelled frames for training: loaded once from simulated MCAP, preprocessed per batch.
+"""Labelled frames for training: loaded once from simulated MCAP, preprocessed once or per batch.
 
 Why in memory: 10,000 frames of 171 x 224 float32 depth plus labels take ~2 GB, far less than
 the machine has, and decoding MCAP every epoch would cost more than the CPU forward pass.
-Preprocessing runs per batch through `edge.preprocess` (the one implementation), so what the
-network sees in training is exactly what it sees in eval, export and replay.
+Preprocessing runs through `edge.preprocess` (the one implementation), so what the network sees
+in training is what it sees in eval, export and replay: either per batch from the raw frames
+(`FrameSet`), or once per frame before the first epoch (`prepare_frames` -> `PreparedSet`), after
+which `make_batch` only flips and pads.
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ import numpy as np
 from edge.errors import DataError
 from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
-from edge.preprocess import preprocess_for
+from edge.preprocess import input_options, padded_shape, preprocess_for
 
-__all__ = ["FrameSet", "load_frames", "split_indices", "make_batch", "data_identity"]
+__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "split_indices", "make_batch",
+           "data_identity"]
 
+PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
 MANIFEST_KEYS = ("tool", "seed", "frames", "config_digest", "engines", "provenance")  # what names a simulated set
 
 
@@ -36,6 +40,65 @@ class FrameSet:
 
     def subset(self, idx: np.ndarray) -> FrameSet:
         return FrameSet(self.depth[idx], self.label[idx], None if self.scene is None else self.scene[idx])
+
+
+@dataclass
+class PreparedSet:
+    """Frames already preprocessed for one model input (`prepare_frames`); `make_batch` reads them.
+
+    Why: preprocessing a frame (robust statistics and the dominant-plane fit of the height cue,
+    `edge.cues`) costs ~0.6 ms, and per batch it ran again in every epoch for the same frames:
+    ~7 % of an epoch of the shipped recipe (BENCHMARKS.md, "preprocessing once"). Once, it costs
+    one pass before the first epoch.
+
+    What differs from per-batch preprocessing: a flip is applied to the preprocessed channels
+    instead of to the raw frame before preprocessing. The flip decisions are the same (the same
+    draws of the same generator); the statistics and the plane fit are those of the unflipped
+    frame, whose sparse sampling grids (every 4th / 6th pixel) fall on other pixels than the
+    flipped frame's, so the inputs differ from per-batch ones by what that resampling changes in
+    the fit, not by the geometry. Without augmentation the batches are identical.
+
+    Memory: ~2x the raw frames (one standardised depth channel and each cue in float32, plus the
+    valid mask and the label), instead of 1x; ``--preprocess per-batch`` keeps the lower figure.
+    """
+
+    channels: np.ndarray  # float32 [N, 1 + len(cues), H, W]: standardised depth once, then each cue, unpadded
+    valid: np.ndarray  # bool [N, H, W]: the pixels the loss counts
+    label: np.ndarray  # uint8 [N, H, W]
+    options: dict  # the `edge.preprocess` arguments it was made with (`input_options(meta)`)
+    scene: np.ndarray | None = None  # as `FrameSet.scene`
+
+    def __len__(self) -> int:
+        return len(self.channels)
+
+    def subset(self, idx: np.ndarray) -> PreparedSet:
+        return PreparedSet(self.channels[idx], self.valid[idx], self.label[idx], self.options,
+                           None if self.scene is None else self.scene[idx])
+
+
+def prepare_frames(fs: FrameSet, meta: ModelMeta, idx: np.ndarray | None = None, progress=None) -> PreparedSet:
+    """Preprocess frames of ``fs`` once for the input ``meta`` describes (see `PreparedSet`).
+
+    Args:
+        fs: the loaded frames.
+        meta: the model whose input is made (channels, standardisation, cues, range, padding).
+        idx: which frames, in this order (None: all); so a split needs no copy of the raw frames.
+        progress: a tqdm-like object whose ``update(1)`` is called per frame.
+    """
+    idx = np.arange(len(fs)) if idx is None else np.asarray(idx)
+    opts = input_options(meta)
+    h, w = fs.depth.shape[1:]
+    ch = opts["channels"]
+    channels = np.empty((len(idx), 1 + len(opts["cues"]), h, w), np.float32)
+    valid = np.empty((len(idx), h, w), bool)
+    for j, i in enumerate(idx):
+        p = preprocess_for(fs.depth[i], meta)
+        channels[j, 0] = p.x[0, :h, :w]
+        channels[j, 1:] = p.x[ch:, :h, :w]
+        valid[j] = p.valid
+        if progress is not None:
+            progress.update(1)
+    return PreparedSet(channels, valid, fs.label[idx], opts, None if fs.scene is None else fs.scene[idx])
 
 
 def _scene_key(k: int, pos: int, scene: dict | None) -> tuple:
@@ -173,14 +236,22 @@ def split_indices(n: int, fractions: tuple[float, float, float], seed: int,
 
 
 def make_batch(
-    fs: FrameSet, idx: np.ndarray, meta: ModelMeta, rng: np.random.Generator | None = None
+    fs: FrameSet | PreparedSet, idx: np.ndarray, meta: ModelMeta, rng: np.random.Generator | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x [B,C,Hp,Wp], target [B,1,Hp,Wp], loss mask [B,1,Hp,Wp]); augment when ``rng`` is given.
 
     Augmentations a depth user would want and that keep the frame size: horizontal flip,
     vertical flip (together: a 180-degree rotation). A 90-degree rotation would change
     171 x 224 into 224 x 171, which the sensor never produces, so it is not used.
+
+    Args:
+        fs: raw frames (preprocessed here) or a `PreparedSet` made for the same input.
+        idx: which frames.
+        meta: the model whose input is made.
+        rng: draws the flips (two draws per frame, in order); None = no augmentation.
     """
+    if isinstance(fs, PreparedSet):
+        return _prepared_batch(fs, idx, meta, rng)
     xs, ts, ms = [], [], []
     for i in idx:
         d, lab = fs.depth[i], fs.label[i]
@@ -200,3 +271,33 @@ def make_batch(
         ts.append(t)
         ms.append(m)
     return np.stack(xs), np.stack(ts), np.stack(ms)
+
+
+def _prepared_batch(
+    ps: PreparedSet, idx: np.ndarray, meta: ModelMeta, rng: np.random.Generator | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`make_batch` of a `PreparedSet`: flip the stored channels, replicate the depth, pad."""
+    if ps.options != input_options(meta):
+        raise DataError(
+            f"frames were preprocessed for {ps.options}, but the model reads {input_options(meta)}; "
+            "prepare them again with this model's metadata (prepare_frames)"
+        )
+    ch = meta.in_channels
+    h, w = ps.label.shape[1:]
+    hp, wp = padded_shape(h, w, meta.pad_multiple)
+    n = len(idx)
+    x = np.zeros((n, ch + len(meta.cues), hp, wp), np.float32)  # padding stays 0, as in `preprocess`
+    t = np.zeros((n, 1, hp, wp), np.float32)
+    m = np.zeros((n, 1, hp, wp), np.float32)
+    for b, i in enumerate(idx):
+        c, lab, val = ps.channels[i], ps.label[i], ps.valid[i]
+        if rng is not None:
+            if rng.random() < 0.5:
+                c, lab, val = c[:, :, ::-1], lab[:, ::-1], val[:, ::-1]
+            if rng.random() < 0.5:
+                c, lab, val = c[:, ::-1, :], lab[::-1, :], val[::-1, :]
+        x[b, :ch, :h, :w] = c[0]
+        x[b, ch:, :h, :w] = c[1:]
+        t[b, 0, :h, :w] = lab
+        m[b, 0, :h, :w] = val
+    return x, t, m

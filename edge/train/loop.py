@@ -50,7 +50,7 @@ from edge.errors import ConfigError, ModelError
 from edge.io import atomic_write, write_bytes_atomic
 from edge.meta import ModelMeta
 from edge.train.checkpoint import checkpoint_meta, contiguous_state, read_checkpoint, save_checkpoint
-from edge.train.data import FrameSet, make_batch
+from edge.train.data import FrameSet, PreparedSet, make_batch
 from edge.train.distributed import Dist
 from edge.train.losses import masked_bce
 from edge.train.model import FCN8s, build_model, count_parameters, freeze_encoder, load_vgg_weights
@@ -161,13 +161,13 @@ class WeightAverage:
         self.updates = int(state["updates"])
 
 
-def _evaluate(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int) -> tuple[float, float]:
+def _evaluate(model: FCN8s, fs: FrameSet | PreparedSet, meta: ModelMeta, batch: int) -> tuple[float, float]:
     """(mean validation loss per valid pixel, mean per-frame object IoU at 0.5)."""
     total, count, iou_sum, n = _eval_sums(model, fs, meta, batch)
     return total / max(count, 1.0), iou_sum / n if n else float("nan")
 
 
-def _eval_sums(model: FCN8s, fs: FrameSet, meta: ModelMeta, batch: int,
+def _eval_sums(model: FCN8s, fs: FrameSet | PreparedSet, meta: ModelMeta, batch: int,
                device: torch.device | None = None,
                memory_format: torch.memory_format = torch.contiguous_format) -> tuple[float, float, float, int]:
     """(loss sum, valid pixels, IoU sum, frames): sums, so ranks of a DDP run can add theirs.
@@ -233,8 +233,8 @@ def plot_losses(history: list[dict[str, Any]], batch_losses: list[float], out: P
 
 def train(
     meta: ModelMeta,
-    train_set: FrameSet,
-    val_set: FrameSet,
+    train_set: FrameSet | PreparedSet,
+    val_set: FrameSet | PreparedSet,
     out_dir: str | Path,
     cfg: TrainConfig,
     resume: bool = False,

@@ -11,7 +11,7 @@ import torch
 from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
-from edge.train.data import FrameSet, load_frames, make_batch, split_indices
+from edge.train.data import FrameSet, load_frames, make_batch, prepare_frames, split_indices
 from edge.train.loop import TrainConfig, train
 from edge.train.losses import masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
@@ -330,3 +330,60 @@ def test_an_unknown_precision_is_a_config_error() -> None:
 def test_an_unknown_memory_format_is_a_config_error() -> None:
     with pytest.raises(ConfigError, match="memory format must be one of channels_last, contiguous"):
         TrainConfig(memory_format="nhwc")
+
+
+HEIGHT_META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=3, cues=("height",),
+                        standardize="robust")
+
+
+def test_frames_preprocessed_once_make_the_same_batches_without_flips() -> None:
+    fs = _frames(6)
+    idx = np.array([4, 0, 3])
+    ps = prepare_frames(fs, HEIGHT_META)
+    for got, want in zip(make_batch(ps, idx, HEIGHT_META), make_batch(fs, idx, HEIGHT_META)):
+        assert got.shape == want.shape and np.array_equal(got, want)
+
+
+def test_frames_preprocessed_once_flip_the_preprocessed_frame_with_the_same_draws() -> None:
+    fs = _frames(4, seed=3)
+    idx = np.arange(4)
+    ps = prepare_frames(fs, HEIGHT_META)
+    x, t, m = make_batch(ps, idx, HEIGHT_META, np.random.default_rng(7))
+    x0, t0, m0 = make_batch(ps, idx, HEIGHT_META)  # unflipped
+    _, t_raw, m_raw = make_batch(fs, idx, HEIGHT_META, np.random.default_rng(7))
+    assert np.array_equal(t, t_raw) and np.array_equal(m, m_raw)  # the same flips of labels and valid pixels
+    rng = np.random.default_rng(7)
+    flipped = 0
+    for b in range(len(idx)):
+        want = x0[b, :, :40, :56]
+        if rng.random() < 0.5:
+            want, flipped = want[:, :, ::-1], flipped + 1
+        if rng.random() < 0.5:
+            want, flipped = want[:, ::-1, :], flipped + 1
+        assert np.array_equal(x[b, :, :40, :56], want)
+        assert not x[b, :, 40:].any() and not x[b, :, :, 56:].any()  # padding stays 0
+    assert flipped > 0  # the seed flips something, so the comparison is not of unflipped frames
+    assert np.array_equal(x[:, 0], x[:, 2])  # depth replicated after the flip
+
+
+def test_frames_preprocessed_for_another_input_are_refused() -> None:
+    ps = prepare_frames(_frames(2), HEIGHT_META)
+    with pytest.raises(DataError, match="preprocessed for"):
+        make_batch(ps, np.array([0]), META)
+
+
+def test_training_on_preprocessed_frames_learns_and_splits_by_index(tmp_path) -> None:
+    fs = _frames(32)
+    tr, va = prepare_frames(fs, META, np.arange(24)), prepare_frames(fs, META, np.arange(24, 32))
+    assert len(tr) == 24 and np.array_equal(tr.label, fs.label[:24]) and len(va.subset(np.arange(3))) == 3
+    res = train(META, tr, va, tmp_path, TrainConfig(epochs=3, batch_size=8, lr=1e-2, seed=0, threads=1))
+    assert min(h["val_loss"] for h in res.history[1:]) < res.history[0]["val_loss"]
+
+
+@pytest.mark.parametrize("mode", ["once", "per-batch"])
+def test_cli_preprocess_modes_train_and_are_recorded(mode, tmp_path) -> None:
+    _write_tiny_mcap(tmp_path / "x")
+    out = tmp_path / mode
+    assert train_main(["--data", str(tmp_path / "x"), "--out", str(out), "--epochs", "1", "--width", "0.0625",
+                       "--batch-size", "2", "--threads", "1", "--split", "0.5,0.5,0", "--preprocess", mode]) == 0
+    assert read_checkpoint(out / "best.pt")["meta"]["training"]["preprocess"] == mode
