@@ -128,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
 
         require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
-        from edge.train.data import data_identity, load_frames, prepare_frames, split_indices
+        from edge.train.data import (available_memory_bytes, data_identity, load_frames, prepare_frames,
+                                      prepared_bytes, split_indices)
         from edge.train.loop import TrainConfig, train
 
         if bool(args.data) == bool(args.train_dir):
@@ -175,8 +176,18 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 sources = [(load_frames(args.train_dir, limit=args.limit, progress=bar, **topics), None),
                            (load_frames(args.val_dir, progress=bar, **topics), None)]
-        if args.preprocess == "once":  # by index from the loaded frames: no copy of the raw split is made
-            total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
+        total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
+        mode = args.preprocess
+        if mode == "once":  # would the prepared frames fit beside what is loaded? else per batch, and say so
+            need = prepared_bytes(total, *sources[0][0].depth.shape[1:], len(cues))
+            free = available_memory_bytes()
+            if free is not None and need > 0.8 * free:
+                mode = "per-batch"
+                if main_rank:
+                    print(f"{PROG}: preprocessing {total} frames once would take {need / 2**30:.1f} GiB of the "
+                          f"{free / 2**30:.1f} GiB available; preprocessing per batch instead (as --preprocess "
+                          "per-batch: slower epochs, less memory)", file=sys.stderr)
+        if mode == "once":  # by index from the loaded frames: no copy of the raw split is made
             with progress(total=total, desc="preprocessing", unit="frame", disable=quiet) as bar:
                 train_set, val_set = [prepare_frames(fs, meta, idx, progress=bar) for fs, idx in sources]
         else:
@@ -190,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
             "input": ("Z depth replicated to 3 channels" if args.in_channels == 3 else "Z depth, 1 channel")
             + (f" + cues {list(cues)}" if cues else "") + f"; standardize={args.standardize}",
             "init": args.encoder_weights or "from scratch (Kaiming, PyTorch default)",
-            "preprocess": args.preprocess,
+            "preprocess": mode,
         }
         steps = -(-len(train_set) // cfg.batch_size)
         bar = progress(total=steps, desc="epoch", unit="batch", disable=quiet)

@@ -20,8 +20,8 @@ from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import input_options, padded_shape, preprocess_for
 
-__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "split_indices", "make_batch",
-           "data_identity"]
+__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes",
+           "available_memory_bytes", "split_indices", "make_batch", "data_identity"]
 
 PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
 MANIFEST_KEYS = ("tool", "seed", "frames", "config_digest", "engines", "provenance")  # what names a simulated set
@@ -74,6 +74,30 @@ class PreparedSet:
     def subset(self, idx: np.ndarray) -> PreparedSet:
         return PreparedSet(self.channels[idx], self.valid[idx], self.label[idx], self.options,
                            None if self.scene is None else self.scene[idx])
+
+
+def prepared_bytes(frames: int, height: int, width: int, cues: int) -> int:
+    """Bytes a `PreparedSet` of that many frames holds: float32 channels, bool valid, uint8 label.
+
+    Args:
+        frames: how many frames.
+        height: frame height in pixels.
+        width: frame width in pixels.
+        cues: cue channels of the model input (`ModelMeta.cues`).
+    """
+    return frames * height * width * (4 * (1 + cues) + 2)
+
+
+def available_memory_bytes() -> int | None:
+    """MemAvailable of /proc/meminfo (Linux), or None where that cannot be read."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 def prepare_frames(fs: FrameSet, meta: ModelMeta, idx: np.ndarray | None = None, progress=None) -> PreparedSet:

@@ -11,7 +11,7 @@ import torch
 from edge.errors import ConfigError, DataError, ModelError
 from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
-from edge.train.data import FrameSet, load_frames, make_batch, prepare_frames, split_indices
+from edge.train.data import FrameSet, load_frames, make_batch, prepare_frames, prepared_bytes, split_indices
 from edge.train.loop import TrainConfig, train
 from edge.train.losses import masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
@@ -387,3 +387,21 @@ def test_cli_preprocess_modes_train_and_are_recorded(mode, tmp_path) -> None:
     assert train_main(["--data", str(tmp_path / "x"), "--out", str(out), "--epochs", "1", "--width", "0.0625",
                        "--batch-size", "2", "--threads", "1", "--split", "0.5,0.5,0", "--preprocess", mode]) == 0
     assert read_checkpoint(out / "best.pt")["meta"]["training"]["preprocess"] == mode
+
+
+def test_preprocessing_once_that_would_not_fit_in_memory_trains_per_batch_and_says_so(tmp_path, capsys,
+                                                                                       monkeypatch) -> None:
+    import edge.train.data as data
+
+    monkeypatch.setattr(data, "available_memory_bytes", lambda: 1000)
+    _write_tiny_mcap(tmp_path / "x")
+    out = tmp_path / "run"
+    assert train_main(["--data", str(tmp_path / "x"), "--out", str(out), "--epochs", "1", "--width", "0.0625",
+                       "--batch-size", "2", "--threads", "1", "--split", "0.5,0.5,0"]) == 0
+    assert "GiB available; preprocessing per batch instead" in capsys.readouterr().err
+    assert read_checkpoint(out / "best.pt")["meta"]["training"]["preprocess"] == "per-batch"
+
+
+def test_the_prepared_set_size_is_what_prepare_frames_allocates() -> None:
+    ps = prepare_frames(_frames(3), HEIGHT_META)
+    assert prepared_bytes(3, 40, 56, 1) == ps.channels.nbytes + ps.valid.nbytes + ps.label.nbytes
