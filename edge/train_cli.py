@@ -128,8 +128,15 @@ def main(argv: list[str] | None = None) -> int:
 
         require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
-        from edge.train.data import (available_memory_bytes, data_identity, load_frames, prepare_frames,
-                                      prepared_bytes, split_indices)
+        from edge.train.data import (
+            RESERVE_BYTES,
+            available_memory_bytes,
+            data_identity,
+            load_frames,
+            prepare_frames,
+            prepared_bytes,
+            split_indices,
+        )
         from edge.train.loop import TrainConfig, train
 
         if bool(args.data) == bool(args.train_dir):
@@ -181,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         if mode == "once":  # would the prepared frames fit beside what is loaded? else per batch, and say so
             need = prepared_bytes(total, *sources[0][0].depth.shape[1:], len(cues))
             free = available_memory_bytes()
-            if free is not None and need > 0.8 * free:
+            if free is not None and need > free - RESERVE_BYTES:
                 mode = "per-batch"
                 if main_rank:
                     print(f"{PROG}: preprocessing {total} frames once would take {need / 2**30:.1f} GiB of the "

@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     for m in modes:
         print(f"{m:<10} {np.median(wall[m]):>15.1f} {np.median(epochs[m]):>9.1f}  "
               + " ".join(f"{v:.1f}" for v in wall[m]))
-    print(f"once / per-batch: whole run x{np.median(wall['once']) / np.median(wall['per-batch']):.3f}, "
+    print(f"ratio once / per-batch: whole run x{np.median(wall['once']) / np.median(wall['per-batch']):.3f}, "
           f"epochs x{np.median(epochs['once']) / np.median(epochs['per-batch']):.3f}")
     return 0
 

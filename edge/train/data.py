@@ -20,7 +20,7 @@ from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import input_options, padded_shape, preprocess_for
 
-__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes",
+__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes", "RESERVE_BYTES",
            "available_memory_bytes", "split_indices", "make_batch", "data_identity"]
 
 PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
@@ -89,7 +89,18 @@ def prepared_bytes(frames: int, height: int, width: int, cues: int) -> int:
 
 
 def available_memory_bytes() -> int | None:
-    """MemAvailable of /proc/meminfo (Linux), or None where that cannot be read."""
+    """MemAvailable of /proc/meminfo (Linux), after handing this process's freed heap back; None elsewhere.
+
+    Why the trim first: loading builds one array per frame and then stacks them; glibc keeps the
+    freed per-frame arrays on its heap, which MemAvailable counts as used although this process
+    can reuse it (32,000 loaded frames: 11.3 GiB available before ``malloc_trim``, 17.3 after).
+    """
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc: read the figure as it is
+        pass
     try:
         with open("/proc/meminfo") as f:
             for line in f:
@@ -98,6 +109,9 @@ def available_memory_bytes() -> int | None:
     except (OSError, ValueError, IndexError):
         return None
     return None
+
+
+RESERVE_BYTES = 1 << 30  # left free beside the prepared frames: the model, its optimizer, batches, the trainer
 
 
 def prepare_frames(fs: FrameSet, meta: ModelMeta, idx: np.ndarray | None = None, progress=None) -> PreparedSet:

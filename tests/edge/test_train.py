@@ -405,3 +405,15 @@ def test_preprocessing_once_that_would_not_fit_in_memory_trains_per_batch_and_sa
 def test_the_prepared_set_size_is_what_prepare_frames_allocates() -> None:
     ps = prepare_frames(_frames(3), HEIGHT_META)
     assert prepared_bytes(3, 40, 56, 1) == ps.channels.nbytes + ps.valid.nbytes + ps.label.nbytes
+
+
+def test_available_memory_is_read_from_meminfo_where_there_is_one() -> None:
+    from pathlib import Path
+
+    from edge.train.data import available_memory_bytes
+
+    got = available_memory_bytes()
+    if Path("/proc/meminfo").exists():
+        assert got is not None and got > 0
+    else:
+        assert got is None

@@ -29,8 +29,8 @@ def test_both_modes_are_run_and_reported_with_their_ratio(tmp_path, capsys):
     out = capsys.readouterr().out
     rows = {line.split()[0]: line.split() for line in out.splitlines() if line.startswith(("per-batch", "once"))}
     assert set(rows) == {"per-batch", "once"}
-    assert all(float(r[1]) > 0 and float(r[2]) > 0 for r in rows.values())
-    assert "once / per-batch: whole run x" in out and "1 runs of each mode" in out
+    assert all(float(r[1]) > 0 and float(r[2]) >= 0 for r in rows.values())  # epochs: log.csv rounds to 0.1 s
+    assert "ratio once / per-batch: whole run x" in out and "1 runs of each mode" in out
 
 
 def test_missing_data_is_one_line_and_exit_2(tmp_path, capsys):
