@@ -91,8 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "validation and checkpoints stay float32")
     t.add_argument("--preprocess", default="once", choices=("once", "per-batch"),
                    help="preprocess every frame once before the first epoch and flip the result (default "
-                   "%(default)s: ~7 %% faster epochs, ~2x the memory of the raw frames), or the raw frames per "
-                   "batch in every epoch (the recipe of every shipped default up to v12; less memory)")
+                   "%(default)s: 4-13 %% faster epochs, 2x the memory of the loaded frames; per batch when that "
+                   "would not fit), or the raw frames per batch in every epoch (the recipe of every shipped "
+                   "default up to v12; less memory)")
     t.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     return p

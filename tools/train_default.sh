@@ -23,8 +23,11 @@
 # Since 2026-12-02 depthseg-train keeps weights and inputs channels-last (--memory-format
 # channels_last, its default): the same arithmetic in another order, 2.2-2.3x faster steps on an
 # AMD EPYC, 1.4-1.6x on an Intel Xeon (BENCHMARKS.md, "a training step in channels-last layout").
-# The shipped v12 was trained in the old NCHW layout; FLAGS="--memory-format contiguous" reruns
-# exactly that (and takes 1.5-2x as long).
+# Since 2026-12-02 it also preprocesses every frame once before the first epoch (--preprocess once,
+# its default; epochs x0.87-0.96, BENCHMARKS.md "preprocessing once"), so the flips turn the
+# preprocessed frame; candidate v19 (32,000 frames) showed this keeps the accuracy.
+# The shipped v12 was trained in the old NCHW layout, preprocessed per batch;
+# FLAGS="--memory-format contiguous --preprocess per-batch" reruns exactly that (1.5-2x as long).
 # On a CPU with AMX (Intel Sapphire Rapids and later: `grep -c amx_bf16 /proc/cpuinfo`), use
 #   FLAGS="--precision bf16" bash tools/train_default.sh
 # bfloat16 autocast of the forward pass, ~1.4x faster steps there: 55.6 min for the whole recipe
