@@ -127,13 +127,11 @@ def prepare_frames(fs: FrameSet, meta: ModelMeta, idx: np.ndarray | None = None,
     idx = np.arange(len(fs)) if idx is None else np.asarray(idx)
     opts = input_options(meta)
     h, w = fs.depth.shape[1:]
-    ch = opts["channels"]
     channels = np.empty((len(idx), 1 + len(opts["cues"]), h, w), np.float32)
     valid = np.empty((len(idx), h, w), bool)
     for j, i in enumerate(idx):
         p = preprocess_for(fs.depth[i], meta)
-        channels[j, 0] = p.x[0, :h, :w]
-        channels[j, 1:] = p.x[ch:, :h, :w]
+        channels[j] = _frame_channels(p, meta, h, w)
         valid[j] = p.valid
         if progress is not None:
             progress.update(1)
@@ -289,52 +287,58 @@ def make_batch(
         meta: the model whose input is made.
         rng: draws the flips (two draws per frame, in order); None = no augmentation.
     """
+    items = []  # per frame: (stored channels [1 + cues, H, W], label, valid), flipped
     if isinstance(fs, PreparedSet):
-        return _prepared_batch(fs, idx, meta, rng)
-    xs, ts, ms = [], [], []
-    for i in idx:
-        d, lab = fs.depth[i], fs.label[i]
-        if rng is not None:
-            if rng.random() < 0.5:
-                d, lab = d[:, ::-1], lab[:, ::-1]
-            if rng.random() < 0.5:
-                d, lab = d[::-1, :], lab[::-1, :]
-        p = preprocess_for(d, meta)
-        hp, wp = p.x.shape[-2:]
-        t = np.zeros((1, hp, wp), np.float32)
-        m = np.zeros((1, hp, wp), np.float32)
-        h, w = lab.shape
-        t[0, :h, :w] = lab
-        m[0, :h, :w] = p.valid
-        xs.append(p.x)
-        ts.append(t)
-        ms.append(m)
-    return np.stack(xs), np.stack(ts), np.stack(ms)
+        if fs.options != input_options(meta):
+            raise DataError(
+                f"frames were preprocessed for {fs.options}, but the model reads {input_options(meta)}; "
+                "prepare them again with this model's metadata (prepare_frames)"
+            )
+        h, w = fs.label.shape[1:]
+        for i in idx:
+            lr, ud = _draw_flips(rng)
+            items.append((_flipped(fs.channels[i], lr, ud), _flipped(fs.label[i], lr, ud),
+                          _flipped(fs.valid[i], lr, ud)))
+    else:
+        h, w = fs.label.shape[1:]
+        for i in idx:
+            lr, ud = _draw_flips(rng)
+            p = preprocess_for(_flipped(fs.depth[i], lr, ud), meta)
+            items.append((_frame_channels(p, meta, h, w), _flipped(fs.label[i], lr, ud), p.valid))
+    return _assemble(items, meta, h, w)
 
 
-def _prepared_batch(
-    ps: PreparedSet, idx: np.ndarray, meta: ModelMeta, rng: np.random.Generator | None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`make_batch` of a `PreparedSet`: flip the stored channels, replicate the depth, pad."""
-    if ps.options != input_options(meta):
-        raise DataError(
-            f"frames were preprocessed for {ps.options}, but the model reads {input_options(meta)}; "
-            "prepare them again with this model's metadata (prepare_frames)"
-        )
+def _draw_flips(rng: np.random.Generator | None) -> tuple[bool, bool]:
+    """(left-right, up-down): two draws per frame, in that order; no flips without ``rng``."""
+    if rng is None:
+        return False, False
+    return bool(rng.random() < 0.5), bool(rng.random() < 0.5)
+
+
+def _flipped(a: np.ndarray, lr: bool, ud: bool) -> np.ndarray:
+    """A view of ``a`` flipped over its last two axes (width, then height)."""
+    if lr:
+        a = a[..., ::-1]
+    if ud:
+        a = a[..., ::-1, :]
+    return a
+
+
+def _frame_channels(p, meta: ModelMeta, h: int, w: int) -> np.ndarray:
+    """float32 [1 + cues, H, W] of an `edge.preprocess.Preprocessed`: the depth once, each cue; unpadded."""
+    return np.concatenate([p.x[:1, :h, :w], p.x[meta.in_channels:, :h, :w]])
+
+
+def _assemble(items: list[tuple[np.ndarray, np.ndarray, np.ndarray]], meta: ModelMeta, h: int,
+              w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The padded batch (x, target, mask) of frames' stored channels: depth replicated, padding 0."""
     ch = meta.in_channels
-    h, w = ps.label.shape[1:]
     hp, wp = padded_shape(h, w, meta.pad_multiple)
-    n = len(idx)
+    n = len(items)
     x = np.zeros((n, ch + len(meta.cues), hp, wp), np.float32)  # padding stays 0, as in `preprocess`
     t = np.zeros((n, 1, hp, wp), np.float32)
-    m = np.zeros((n, 1, hp, wp), np.float32)
-    for b, i in enumerate(idx):
-        c, lab, val = ps.channels[i], ps.label[i], ps.valid[i]
-        if rng is not None:
-            if rng.random() < 0.5:
-                c, lab, val = c[:, :, ::-1], lab[:, ::-1], val[:, ::-1]
-            if rng.random() < 0.5:
-                c, lab, val = c[:, ::-1, :], lab[::-1, :], val[::-1, :]
+    m = np.zeros((n, 1, hp, wp), np.float32)  # padding never reaches the loss
+    for b, (c, lab, val) in enumerate(items):
         x[b, :ch, :h, :w] = c[0]
         x[b, ch:, :h, :w] = c[1:]
         t[b, 0, :h, :w] = lab
