@@ -89,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="of the training forward pass (default %(default)s); bf16 = bfloat16 autocast, ~1.4x faster "
                    "steps on CPUs with AMX (Intel Sapphire Rapids+), no faster elsewhere; weights, loss, "
                    "validation and checkpoints stay float32")
-    t.add_argument("--preprocess", default="once", choices=("once", "per-batch"),
+    t.add_argument("--preprocess", default="once", choices=("once", "per-batch"),  # edge.train.data.PREPROCESS_MODES
                    help="preprocess every frame once before the first epoch and flip the result (default "
                    "%(default)s: 4-13 %% faster epochs, 2x the memory of the loaded frames; per batch when that "
                    "would not fit), or the raw frames per batch in every epoch (the recipe of every shipped "
@@ -130,12 +130,10 @@ def main(argv: list[str] | None = None) -> int:
         require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
         from edge.train.data import (
-            RESERVE_BYTES,
-            available_memory_bytes,
             data_identity,
             load_frames,
             prepare_frames,
-            prepared_bytes,
+            preprocess_mode,
             split_indices,
         )
         from edge.train.loop import TrainConfig, train
@@ -185,16 +183,9 @@ def main(argv: list[str] | None = None) -> int:
                 sources = [(load_frames(args.train_dir, limit=args.limit, progress=bar, **topics), None),
                            (load_frames(args.val_dir, progress=bar, **topics), None)]
         total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
-        mode = args.preprocess
-        if mode == "once":  # would the prepared frames fit beside what is loaded? else per batch, and say so
-            need = prepared_bytes(total, *sources[0][0].depth.shape[1:], len(cues))
-            free = available_memory_bytes()
-            if free is not None and need > free - RESERVE_BYTES:
-                mode = "per-batch"
-                if main_rank:
-                    print(f"{PROG}: preprocessing {total} frames once would take {need / 2**30:.1f} GiB of the "
-                          f"{free / 2**30:.1f} GiB available; preprocessing per batch instead (as --preprocess "
-                          "per-batch: slower epochs, less memory)", file=sys.stderr)
+        mode, why = preprocess_mode(args.preprocess, total, *sources[0][0].depth.shape[1:], len(cues))
+        if why and main_rank:
+            print(f"{PROG}: {why}", file=sys.stderr)
         if mode == "once":  # by index from the loaded frames: no copy of the raw split is made
             with progress(total=total, desc="preprocessing", unit="frame", disable=quiet) as bar:
                 train_set, val_set = [prepare_frames(fs, meta, idx, progress=bar) for fs, idx in sources]

@@ -20,7 +20,7 @@ from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import input_options, padded_shape, preprocess_for
 
-__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes", "RESERVE_BYTES",
+__all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes", "preprocess_mode", "RESERVE_BYTES",
            "available_memory_bytes", "split_indices", "make_batch", "data_identity"]
 
 PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
@@ -113,6 +113,29 @@ def available_memory_bytes() -> int | None:
 
 
 RESERVE_BYTES = 1 << 30  # left free beside the prepared frames: the model, its optimizer, batches, the trainer
+
+
+def preprocess_mode(requested: str, frames: int, height: int, width: int, cues: int) -> tuple[str, str | None]:
+    """(the mode to train with, a one-line reason when it is not ``requested``).
+
+    "once" falls back to "per-batch" when its prepared frames (`prepared_bytes`) would not fit
+    in the available memory less `RESERVE_BYTES`: the run then trains slower instead of failing.
+
+    Args:
+        requested: one of `PREPROCESS_MODES`.
+        frames: training plus validation frames.
+        height: frame height in pixels.
+        width: frame width in pixels.
+        cues: cue channels of the model input.
+    """
+    if requested != "once":
+        return requested, None
+    need, free = prepared_bytes(frames, height, width, cues), available_memory_bytes()
+    if free is None or need <= free - RESERVE_BYTES:
+        return "once", None
+    return "per-batch", (f"preprocessing {frames} frames once would take {need / 2**30:.1f} GiB of the "
+                         f"{free / 2**30:.1f} GiB available; preprocessing per batch instead (as --preprocess "
+                         "per-batch: slower epochs, less memory)")
 
 
 def prepare_frames(fs: FrameSet, meta: ModelMeta, idx: np.ndarray | None = None, progress=None) -> PreparedSet:
