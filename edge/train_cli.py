@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                          standardize=args.standardize,
                          cues=cues)
         topics = {"depth_topic": args.depth_topic, "labels_topic": args.labels_topic}
-        from edge.train.distributed import is_main_process
+        from edge.train.distributed import Dist, is_main_process, local_world_size
 
         main_rank = is_main_process()  # under torchrun only rank 0 prints (edge.train.distributed)
         quiet = None if main_rank else True
@@ -183,7 +183,14 @@ def main(argv: list[str] | None = None) -> int:
                 sources = [(load_frames(args.train_dir, limit=args.limit, progress=bar, **topics), None),
                            (load_frames(args.val_dir, progress=bar, **topics), None)]
         total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
-        mode, why = preprocess_mode(args.preprocess, total, *sources[0][0].depth.shape[1:], len(cues))
+        # Under torchrun every rank prepares the whole set: the check counts this machine's ranks,
+        # runs once all of them have loaded, and any rank short of memory moves all to per-batch.
+        ddp = Dist.from_env()
+        ddp.all_sum([0.0])  # a barrier: every rank has its frames loaded before memory is read
+        mode, why = preprocess_mode(args.preprocess, total, *sources[0][0].depth.shape[1:], len(cues),
+                                    copies=local_world_size())
+        if not ddp.all_agree(mode == args.preprocess):
+            mode, why = "per-batch", why or "another rank's machine lacks the memory to preprocess once; preprocessing per batch"
         if why and main_rank:
             print(f"{PROG}: {why}", file=sys.stderr)
         if mode == "once":  # by index from the loaded frames: no copy of the raw split is made
@@ -215,8 +222,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"epoch {row['epoch']:3d}  train {row['train_loss']:.4f}  val {row['val_loss']:.4f}  "
                   f"val IoU {row['val_iou']:.4f}  lr {row['lr']:.2e}  {row['epoch_seconds']:.0f}s", file=sys.stderr, flush=True)
 
-        res = train(meta, train_set, val_set, args.out, cfg, resume=args.resume, on_batch=on_batch,
-                    on_epoch=on_epoch, training_info=info)
+        try:  # the group opened above is this command's to close (train() joins it, `Dist.from_env`)
+            res = train(meta, train_set, val_set, args.out, cfg, resume=args.resume, on_batch=on_batch,
+                        on_epoch=on_epoch, training_info=info)
+        finally:
+            ddp.close()
         bar.close()
         summary = {
             "best_epoch": res.best_epoch, "best_val_loss": res.best_val_loss, "epochs_run": res.epochs_run,

@@ -115,7 +115,8 @@ def available_memory_bytes() -> int | None:
 RESERVE_BYTES = 1 << 30  # left free beside the prepared frames: the model, its optimizer, batches, the trainer
 
 
-def preprocess_mode(requested: str, frames: int, height: int, width: int, cues: int) -> tuple[str, str | None]:
+def preprocess_mode(requested: str, frames: int, height: int, width: int, cues: int,
+                    copies: int = 1) -> tuple[str, str | None]:
     """(the mode to train with, a one-line reason when it is not ``requested``).
 
     "once" falls back to "per-batch" when its prepared frames (`prepared_bytes`) would not fit
@@ -127,13 +128,18 @@ def preprocess_mode(requested: str, frames: int, height: int, width: int, cues: 
         height: frame height in pixels.
         width: frame width in pixels.
         cues: cue channels of the model input.
+        copies: processes on this machine that each prepare the same frames (torchrun's
+            ``LOCAL_WORLD_SIZE``: every rank holds the whole prepared set, `edge.train.distributed`),
+            so that ranks starting together cannot each pass a check that together they fail.
     """
     if requested != "once":
         return requested, None
-    need, free = prepared_bytes(frames, height, width, cues), available_memory_bytes()
+    copies = max(int(copies), 1)
+    need, free = copies * prepared_bytes(frames, height, width, cues), available_memory_bytes()
     if free is None or need <= free - RESERVE_BYTES:
         return "once", None
-    return "per-batch", (f"preprocessing {frames} frames once would take {need / 2**30:.1f} GiB of the "
+    who = f" ({copies} processes on this machine, each a copy)" if copies > 1 else ""
+    return "per-batch", (f"preprocessing {frames} frames once would take {need / 2**30:.1f} GiB{who} of the "
                          f"{free / 2**30:.1f} GiB available; preprocessing per batch instead (as --preprocess "
                          "per-batch: slower epochs, less memory)")
 

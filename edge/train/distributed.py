@@ -30,7 +30,7 @@ import torch
 
 from edge.train.losses import soft_jaccard
 
-__all__ = ["Dist", "env_world", "is_main_process"]
+__all__ = ["Dist", "env_world", "is_main_process", "local_world_size"]
 
 
 def env_world() -> tuple[int, int, int]:
@@ -40,6 +40,11 @@ def env_world() -> tuple[int, int, int]:
 
 def is_main_process() -> bool:
     return env_world()[0] == 0
+
+
+def local_world_size() -> int:
+    """Processes of this run on this machine (torchrun's ``LOCAL_WORLD_SIZE``); 1 without torchrun."""
+    return max(int(os.environ.get("LOCAL_WORLD_SIZE", 1)), 1)
 
 
 @dataclass
@@ -131,6 +136,16 @@ class Dist:
         t = torch.tensor([1 if flag else 0], device=self.device)
         dist.broadcast(t, src=0)
         return bool(t.item())
+
+    def all_agree(self, flag: bool) -> bool:
+        """True on every rank only when ``flag`` is true on every rank (one process: ``flag``).
+
+        Why not `agree`: a decision about this machine's memory is each rank's own to veto; rank
+        0's view of its machine says nothing of another node's.
+        """
+        if not self.enabled:
+            return flag
+        return self.all_sum([0.0 if flag else 1.0])[0] == 0.0
 
     def shard(self, n: int) -> np.ndarray:
         """Indices of ``n`` items this rank evaluates."""

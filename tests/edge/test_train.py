@@ -402,6 +402,26 @@ def test_preprocessing_once_that_would_not_fit_in_memory_trains_per_batch_and_sa
     assert read_checkpoint(out / "best.pt")["meta"]["training"]["preprocess"] == "per-batch"
 
 
+def test_the_memory_check_counts_every_process_of_this_machine(monkeypatch) -> None:
+    import edge.train.data as data
+
+    one = data.prepared_bytes(100, 40, 56, 1)
+    monkeypatch.setattr(data, "available_memory_bytes", lambda: data.RESERVE_BYTES + int(1.5 * one))
+    assert data.preprocess_mode("once", 100, 40, 56, 1) == ("once", None)
+    mode, why = data.preprocess_mode("once", 100, 40, 56, 1, copies=2)  # two torchrun ranks: 2 copies
+    assert mode == "per-batch" and "2 processes on this machine" in why
+    assert data.preprocess_mode("per-batch", 100, 40, 56, 1, copies=2) == ("per-batch", None)
+
+
+def test_one_process_agrees_with_itself_and_reads_one_local_process(monkeypatch) -> None:
+    from edge.train.distributed import Dist, local_world_size
+
+    monkeypatch.delenv("LOCAL_WORLD_SIZE", raising=False)
+    assert local_world_size() == 1 and Dist().all_agree(True) and not Dist().all_agree(False)
+    monkeypatch.setenv("LOCAL_WORLD_SIZE", "4")
+    assert local_world_size() == 4
+
+
 def test_the_prepared_set_size_is_what_prepare_frames_allocates() -> None:
     ps = prepare_frames(_frames(3), HEIGHT_META)
     assert prepared_bytes(3, 40, 56, 1) == ps.channels.nbytes + ps.valid.nbytes + ps.label.nbytes
