@@ -1,0 +1,51 @@
+"""tools/false_object_heights.py: false-object pixels near outlines split by height above the table."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from toolmod import load_tool
+
+from edge.errors import ConfigError
+from edge.io.writer import FrameWriter
+
+
+class _FixedMask:
+    """A stand-in for `Segmenter`: the mask it is given, whatever the depth."""
+
+    def __init__(self, mask: np.ndarray) -> None:
+        self.mask = mask
+
+    def predict(self, depth: np.ndarray) -> SimpleNamespace:
+        return SimpleNamespace(mask=self.mask)
+
+
+def test_a_raised_rim_and_a_table_level_rim_are_told_apart(tmp_path):
+    h, w = 60, 80
+    depth = np.full((h, w), 0.30, np.float32)  # a flat table 30 cm below the camera
+    label = np.zeros((h, w), np.uint8)
+    depth[20:40, 30:50], label[20:40, 30:50] = 0.25, 1  # a 5 cm box
+    depth[20:40, 29] = 0.295  # left of it a 1 px rim 5 mm up (an object's base, under a 10 mm rule)
+    mask = label.copy()
+    mask[20:40, 29] = 1  # the model calls both rims object
+    mask[20:40, 50] = 1  # right of the box: at table level (a blur halo)
+    mask[5, 5] = 1  # and one speck far from any outline
+    path = tmp_path / "f.mcap"
+    with FrameWriter(path) as fw:
+        fw.write(0, depth, label, (60.0, 60.0, 40.0, 30.0))
+    tool = load_tool("false_object_heights.py")
+    r = tool.height_split(path, _FixedMask(mask))
+    union = 400 + 20 + 20 + 1
+    assert r["frames"] == 1 and r["union"] == union
+    # the labeller's 3 x 3 median puts the rim's two end pixels (5 table pixels around each) at table level
+    assert r["fp_near_raised_under_rule"] == pytest.approx(100 * 18 / union)
+    assert r["fp_near_table_level"] == pytest.approx(100 * 22 / union)
+    assert r["fp_near_over_rule"] == 0.0 and r["fp_far"] == pytest.approx(100 / union)
+    assert r["fp_near"] == pytest.approx(r["fp_near_table_level"] + r["fp_near_raised_under_rule"])
+
+
+def test_the_split_needs_the_table_level_below_the_rule(tmp_path):
+    with pytest.raises(ConfigError, match="below the rule's line"):
+        load_tool("false_object_heights.py").height_split(tmp_path / "none.mcap", None, low_m=0.01, rule_m=0.01)
