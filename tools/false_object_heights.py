@@ -56,7 +56,9 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
 
     Returns:
         ``frames``, ``union`` (pixels), and in % of the union: ``fp_near`` and its parts
-        ``fp_near_table_level``, ``fp_near_raised_under_rule``, ``fp_near_over_rule``; ``fp_far``.
+        ``fp_near_table_level``, ``fp_near_raised_under_rule``, ``fp_near_over_rule``; ``fp_far``;
+        the missed object pixels in the band ``fn_near`` and the part of them at table level,
+        ``fn_near_table_level`` (object surface that depth alone cannot tell from the table).
 
     Raises:
         DataError: no labelled frame.
@@ -67,7 +69,7 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
     base = PlaneBaseline()
     frames, _n = open_frames(data)
     n = union = 0
-    parts = np.zeros(4, np.int64)  # table level, raised under the rule, over the rule, far
+    parts = np.zeros(6, np.int64)  # FP near: table level, raised under the rule, over it; FP far; FN near, at table level
     for fr in frames:
         if fr.label is None:
             continue
@@ -78,16 +80,19 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
         obj, lab = (mask == 1) & known, (fr.label == 1) & known
         fp = obj & ~lab
         union += int((obj | lab).sum())
-        near = fp & boundary_band(fr.label == 1, boundary_px)
+        band = boundary_band(fr.label == 1, boundary_px)
+        near, fn_near = fp & band, lab & ~obj & band
         h = base.heights(fr.depth, intrinsics_for(fr.depth.shape, fr.info))
         parts += [int((near & (h < low_m)).sum()), int((near & (h >= low_m) & (h <= rule_m)).sum()),
-                  int((near & (h > rule_m)).sum()), int((fp & ~near).sum())]
+                  int((near & (h > rule_m)).sum()), int((fp & ~near).sum()), int(fn_near.sum()),
+                  int((fn_near & (h < low_m)).sum())]
         n += 1
     if n == 0:
         raise DataError(f"{data}: no labelled frame; give a recording with a labels topic")
     pct = 100.0 * parts / max(union, 1)
     return {"frames": n, "union": union, "fp_near": float(pct[:3].sum()), "fp_near_table_level": float(pct[0]),
-            "fp_near_raised_under_rule": float(pct[1]), "fp_near_over_rule": float(pct[2]), "fp_far": float(pct[3])}
+            "fp_near_raised_under_rule": float(pct[1]), "fp_near_over_rule": float(pct[2]), "fp_far": float(pct[3]),
+            "fn_near": float(pct[4]), "fn_near_table_level": float(pct[5])}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -110,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.data}: {r['frames']} frames; false object in % of the union: within {args.boundary_px} px "
                   f"of outlines {r['fp_near']:.2f} = table level (< {args.low_mm:g} mm) {r['fp_near_table_level']:.2f}"
                   f" + raised under {args.rule_mm:g} mm {r['fp_near_raised_under_rule']:.2f} + over it "
-                  f"{r['fp_near_over_rule']:.2f}; farther {r['fp_far']:.2f}")
+                  f"{r['fp_near_over_rule']:.2f}; farther {r['fp_far']:.2f}. Missed object within {args.boundary_px}"
+                  f" px: {r['fn_near']:.2f}, at table level {r['fn_near_table_level']:.2f}")
         return 0
 
     return run(PROG, body, p)

@@ -32,18 +32,21 @@ def test_a_raised_rim_and_a_table_level_rim_are_told_apart(tmp_path):
     mask[20:40, 29] = 1  # the model calls both rims object
     mask[20:40, 50] = 1  # right of the box: at table level (a blur halo)
     mask[5, 5] = 1  # and one speck far from any outline
+    mask[20, 30:50] = 0  # the box's top row missed: 50 mm up, not at table level
     path = tmp_path / "f.mcap"
     with FrameWriter(path) as fw:
         fw.write(0, depth, label, (60.0, 60.0, 40.0, 30.0))
     tool = load_tool("false_object_heights.py")
     r = tool.height_split(path, _FixedMask(mask))
-    union = 400 + 20 + 20 + 1
+    union = 400 + 20 + 20 + 1  # the missed row stays in the union (label 1)
     assert r["frames"] == 1 and r["union"] == union
     # the labeller's 3 x 3 median puts the rim's two end pixels (5 table pixels around each) at table level
     assert r["fp_near_raised_under_rule"] == pytest.approx(100 * 18 / union)
     assert r["fp_near_table_level"] == pytest.approx(100 * 22 / union)
     assert r["fp_near_over_rule"] == 0.0 and r["fp_far"] == pytest.approx(100 / union)
     assert r["fp_near"] == pytest.approx(r["fp_near_table_level"] + r["fp_near_raised_under_rule"])
+    # of the missed row only the corner beside the table-level rim reads table level through the median
+    assert r["fn_near"] == pytest.approx(100 * 20 / union) and r["fn_near_table_level"] == pytest.approx(100 / union)
 
 
 def test_the_split_needs_the_table_level_below_the_rule(tmp_path):
