@@ -61,6 +61,10 @@ class SimConfig:
     # capture). A fixed set keeps the ray grids cached per worker.
     intrinsics_steps: int = 0
     intrinsics_to: tuple[float, float, float, float] = REAL_PICO_FLEXX_K
+    # Labels: 0 = an object pixel is object wherever the ray hits it (the default); h > 0 = the
+    # parts of objects lower than h metres above the table are table, as a geometric labelling
+    # rule calls them; objects entirely below h stay object (`sim.render.RenderResult.label_above`).
+    label_min_height_m: float = 0.0
 
     def camera_for(self, rng: np.random.Generator | None) -> Camera:
         """The camera of one frame (drawn from ``rng`` only when ``intrinsics_steps`` > 0)."""
@@ -94,12 +98,14 @@ class SimConfig:
                 if self.intrinsics_steps
                 else {}
             ),
+            **({"label_min_height_m": self.label_min_height_m} if self.label_min_height_m else {}),
         }
 
     def __post_init__(self) -> None:
         check_fields(self, "config")
         check_number("config.render_threads", self.render_threads, 1, MAX_RENDER_THREADS)
         check_number("config.intrinsics_steps", self.intrinsics_steps, 0, 64)
+        check_number("config.label_min_height_m", self.label_min_height_m, 0.0, 0.1)
         if min(self.intrinsics_to) <= 0:
             raise ConfigError(
                 f"config.intrinsics_to must be four positive numbers fx, fy, cx, cy; got {list(self.intrinsics_to)}"
@@ -118,7 +124,7 @@ class SimConfig:
             raise ConfigError(f"a simulator config must be a JSON object {{\"scene\": ...}}, got {type(d).__name__}")
         d = dict(d)
         known = {"scene", "physics", "sensor", "camera", "supersample_edges", "render_threads", "intrinsics_steps",
-                 "intrinsics_to"}
+                 "intrinsics_to", "label_min_height_m"}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ConfigError(f"unknown config sections {_short_keys(unknown)}; valid: {sorted(known)}")
@@ -156,6 +162,7 @@ class SimConfig:
             camera=camera,
             supersample_edges=d.get("supersample_edges", True),
             render_threads=d.get("render_threads", 1),
+            label_min_height_m=d.get("label_min_height_m", 0.0),
         )
 
     def digest(self) -> str:
@@ -254,7 +261,7 @@ def generate_frame(
     params["config_digest"] = config.digest()
     if views > 1:
         params["view"] = view
-    label = rr.label
+    label = rr.label_above(config.label_min_height_m)
     return SimFrame(
         index=int(index),
         stamp_ns=SIM_EPOCH_NS + int(index) * FRAME_PERIOD_NS,

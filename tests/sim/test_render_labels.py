@@ -110,3 +110,57 @@ def test_distorted_rays_project_back_to_their_pixels():
     err = np.hypot(proj[:, 0, 0] - u.ravel(), proj[:, 0, 1] - v.ravel())
     # the strong TOF-VIO distortion does not invert well in the extreme corners (dead anyway)
     assert np.median(err) < 1e-3 and np.percentile(err, 95) < 0.05
+
+
+# ----------------------------------------------------------------------------- label_min_height_m
+
+
+def _ids_heights():
+    """A 5 cm box (id 1) whose lowest 4 mm show as a 2 px base ring, and a 3 mm plate (id 2)."""
+    from sim.render import RenderResult
+
+    h, w = 40, 60
+    ids = np.zeros((h, w), np.int32)
+    height = np.zeros((h, w), np.float32)
+    ids[8:20, 8:20], height[8:20, 8:20] = 1, 0.002  # the box's base (2 mm), seen beside its side
+    ids[10:18, 10:18], height[10:18, 10:18] = 1, 0.050  # its top and upper side
+    ids[25:30, 30:50], height[25:30, 30:50] = 2, 0.003  # a flat plate
+    empty = np.zeros((0, 4))
+    return RenderResult(z=np.full((h, w), 0.3, np.float32), r=np.full((h, w), 0.3, np.float32), ids=ids,
+                        cos_inc=np.ones((h, w), np.float32), height=height, edge=np.zeros(0, np.int64),
+                        sub_r=empty, sub_ids=empty.astype(np.int32), sub_cos=empty)
+
+
+def test_labels_above_a_line_call_the_base_of_tall_objects_table_and_keep_thin_objects_whole():
+    rr = _ids_heights()
+    assert np.array_equal(rr.label_above(0.0), rr.label)
+    lab = rr.label_above(0.010)
+    assert lab[8:20, 8:20].sum() == 64 and lab[10:18, 10:18].all()  # the base ring is table, the box above it object
+    assert lab[25:30, 30:50].all()  # the plate never reaches 10 mm: object whole
+    assert not (lab.astype(bool) & ~rr.label.astype(bool)).any()  # only object pixels ever change
+
+
+def test_the_line_is_measured_from_a_curved_table_top():
+    from sim.render import Support
+
+    box, tris = _box_world((0.04, 0.04, 0.004), (0.0, 0.0, 0.0), 0.0)  # a 4 mm plate centred on the apex
+    rot = np.diag([1.0, -1.0, -1.0])
+    flat = render([(box + np.array([0, 0, 0.002], np.float32), tris)], CAM, rot, np.array([0.0, 0.0, 0.3]))
+    curved = render([(box + np.array([0.12, 0, 0.002 + 0.5 * 0.12**2], np.float32), tris)], CAM, rot,
+                    np.array([0.0, 0.0, 0.3]), support=Support(curvature=0.5))
+    assert curved.height[curved.ids == 1].max() > 0.011  # 7 mm of bowl under it: over the line from the floor
+    for rr in (flat, curved):  # but over the table top under each hit it stays under 9 mm: a thin object
+        assert rr.above_support[rr.ids == 1].max() < 0.009
+        assert np.array_equal(rr.label_above(0.010), rr.label) and rr.label.sum() > 50
+
+
+def test_a_label_line_changes_labels_only_and_only_when_asked():
+    from sim.generate import SimConfig, generate_frame
+
+    plain = SimConfig.from_dict({"scene": {"n_objects": [3, 5]}})
+    ruled = SimConfig.from_dict({"scene": {"n_objects": [3, 5]}, "label_min_height_m": 0.01})
+    assert "label_min_height_m" not in plain.to_dict() and SimConfig().digest() == SimConfig.from_dict({}).digest()
+    assert SimConfig.from_dict(ruled.to_dict()).digest() == ruled.digest() != plain.digest()
+    a, b = generate_frame(1, 7, plain), generate_frame(1, 7, ruled)
+    assert np.array_equal(a.depth, b.depth) and np.array_equal(a.clean, b.clean)
+    assert not (b.label & ~a.label).any() and 0 < b.label.sum() < a.label.sum()
