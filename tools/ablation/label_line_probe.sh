@@ -4,7 +4,7 @@
 # do to the held-out sets, against the same recipe on the simulator's own labels?
 # Both arms: the same 8,000 frames (seed 1, the shipped recipe's config; the line changes labels
 # only, so the depth frames are identical), the shipped recipe's flags, 8 epochs.
-#   bash tools/ablation/label_line_probe.sh           # ~25 min on a 2-core machine (both arms)
+#   bash tools/ablation/label_line_probe.sh           # ~40 min on a 2-core machine (both arms); FRAMES=6000 EPOCHS=6: ~20 min
 # then: .venv/bin/python tools/ablation/eval_ablation.py --candidates runs/probe_rays/model.onnx runs/probe_line10/model.onnx
 set -euo pipefail
 cd "$(dirname "$0")/../.."
