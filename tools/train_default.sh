@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Recipe of the shipped default model (edge/models/default.pt and default.onnx).
+# Recipe of the shipped default model (edge/models/default.pt and default.onnx), v19d.
 #
-#   bash tools/train_default.sh            # ~60 min on a 2-core machine (v12 in NCHW, 2026-12-01: training 54.8 min, export < 1 min, the simulation of 24,000 frames ~3.3 min); channels-last (now): 49 min + ~3.3 min simulation on 2026-12-02 (candidate v16); BENCHMARKS.md ("Issue 9: candidate v12, 24,000 frames", "candidate v16")
+#   bash tools/train_default.sh            # 54-83 min on a 2-core AMD EPYC, by the day: 54.2 and 60.7 min on
+#                                          # 2026-12-02 (v19, v19c), 83.0 min on 2026-12-03 (v19d, a ~1.5x slower
+#                                          # machine); BENCHMARKS.md "candidate v19", "candidate v19d, results"
+#   FRAMES=24000 bash tools/train_default.sh   # the previous default v12's data volume (~52-60 min)
 #
-# 1. simulate 24,000 labelled frames (seed 1; 4 camera views of each of 6,000 settled scenes, which
+# 1. simulate 32,000 labelled frames (seed 1; 4 camera views of each of 8,000 settled scenes, which
 #    makes ~100 frames/s with 2 workers) with the pico flexx sensor model, wider domain
 #    randomisation and the scene families where a plane fit fails (tools/default_sim_config.json:
 #    noise level x0.7-3.5, 30 % white-noise frames as BlenSor's, dead-corner cone 31.5-38 deg, edges
@@ -26,7 +29,7 @@
 # Since 2026-12-02 it also preprocesses every frame once before the first epoch (--preprocess once,
 # its default; epochs x0.87-0.96, BENCHMARKS.md "preprocessing once"), so the flips turn the
 # preprocessed frame; candidate v19 (32,000 frames) showed this keeps the accuracy.
-# The shipped v12 was trained in the old NCHW layout, preprocessed per batch;
+# The previous default v12 (FRAMES=24000) was trained in the old NCHW layout, preprocessed per batch;
 # FLAGS="--memory-format contiguous --preprocess per-batch" reruns exactly that (1.5-2x as long).
 # On a CPU with AMX (Intel Sapphire Rapids and later: `grep -c amx_bf16 /proc/cpuinfo`), use
 #   FLAGS="--precision bf16" bash tools/train_default.sh
@@ -38,9 +41,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=.venv/bin
-DATA=${DATA:-data/train_v12}
-RUN=${RUN:-runs/v12}
-FRAMES=${FRAMES:-24000}
+DATA=${DATA:-data/train_v19}
+RUN=${RUN:-runs/v19}
+FRAMES=${FRAMES:-32000}
 EPOCHS=${EPOCHS:-11}
 MINUTES=${MINUTES:-}  # a wall-clock cap (minutes) for trials; unset, all epochs run, so the model is the same on a slow machine
 CONFIG=${CONFIG:-tools/default_sim_config.json}
