@@ -25,8 +25,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
@@ -36,7 +34,7 @@ from edge.cliutil import print_json, run  # noqa: E402
 from edge.errors import ConfigError, DataError  # noqa: E402
 from edge.infer import Segmenter  # noqa: E402
 from edge.io import open_frames  # noqa: E402
-from edge.metrics import UNKNOWN, boundary_band  # noqa: E402
+from edge.metrics import UNKNOWN, BreakdownAccumulator  # noqa: E402
 
 PROG = "false_object_heights"
 
@@ -68,8 +66,12 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
         raise ConfigError(f"the table-level height must be >= 0 and below the rule's line, got {low_m} and {rule_m}")
     base = PlaneBaseline()
     frames, _n = open_frames(data)
-    n = union = 0
-    parts = np.zeros(6, np.int64)  # FP near: table level, raised under the rule, over it; FP far; FN near, at table level
+    # One `BreakdownAccumulator` (the eval breakdown's own counting) over all scored pixels, and one
+    # per height class over that class's pixels only: the classes partition the pixels, so their
+    # error counts split the overall ones.
+    total = BreakdownAccumulator(boundary_px)
+    classes = {name: BreakdownAccumulator(boundary_px) for name in ("table_level", "raised_under_rule", "over_rule")}
+    n = 0
     for fr in frames:
         if fr.label is None:
             continue
@@ -77,22 +79,24 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
             break
         mask = seg.predict(fr.depth).mask
         known = mask != UNKNOWN
-        obj, lab = (mask == 1) & known, (fr.label == 1) & known
-        fp = obj & ~lab
-        union += int((obj | lab).sum())
-        band = boundary_band(fr.label == 1, boundary_px)
-        near, fn_near = fp & band, lab & ~obj & band
+        obj = mask == 1
         h = base.heights(fr.depth, intrinsics_for(fr.depth.shape, fr.info))
-        parts += [int((near & (h < low_m)).sum()), int((near & (h >= low_m) & (h <= rule_m)).sum()),
-                  int((near & (h > rule_m)).sum()), int((fp & ~near).sum()), int(fn_near.sum()),
-                  int((fn_near & (h < low_m)).sum())]
+        total.add(obj, fr.label, known)
+        for name, sel in (("table_level", h < low_m), ("raised_under_rule", (h >= low_m) & (h <= rule_m)),
+                          ("over_rule", h > rule_m)):
+            classes[name].add(obj, fr.label, known & sel)
         n += 1
     if n == 0:
         raise DataError(f"{data}: no labelled frame; give a recording with a labels topic")
-    pct = 100.0 * parts / max(union, 1)
-    return {"frames": n, "union": union, "fp_near": float(pct[:3].sum()), "fp_near_table_level": float(pct[0]),
-            "fp_near_raised_under_rule": float(pct[1]), "fp_near_over_rule": float(pct[2]), "fp_far": float(pct[3]),
-            "fn_near": float(pct[4]), "fn_near_table_level": float(pct[5])}
+    t = total.summary()
+    c = {name: acc.summary() for name, acc in classes.items()}
+
+    def pct(count: int) -> float:
+        return 100.0 * count / max(t.union, 1)
+
+    return {"frames": n, "union": t.union, "fp_near": pct(t.fp_boundary),
+            **{f"fp_near_{name}": pct(b.fp_boundary) for name, b in c.items()},
+            "fp_far": pct(t.fp_far), "fn_near": pct(t.fn_boundary), "fn_near_table_level": pct(c["table_level"].fn_boundary)}
 
 
 def main(argv: list[str] | None = None) -> int:
