@@ -180,6 +180,7 @@ def bench_models(
     on_round: Callable[[int], None] | None = None,
     block: int = DEFAULT_BLOCK,
     rate: float | None = None,
+    min_height_m: float | None = None,
 ) -> list[dict[str, Any]]:
     """Time every model on ``frames`` (cycled), interleaved round-robin; one result dict per model.
 
@@ -194,6 +195,8 @@ def bench_models(
             alternate every frame; see the module docstring for why the default is larger).
         rate: start the timed frames 1/rate s apart, as a sensor delivers them (None: back to
             back); a frame that takes longer than 1/rate starts the next one at once.
+        min_height_m: every model's height rule for this run (None: each model's own;
+            `edge.postprocess.remove_low_parts`), so its cost shows in the 'post' column.
     """
     if not specs:
         raise ConfigError("no model to benchmark")
@@ -208,7 +211,7 @@ def bench_models(
         gc.collect()
         rss0 = _rss_mb()
         t0 = time.perf_counter()
-        seg = Segmenter(spec.path, threads=spec.threads, spin=spin)
+        seg = Segmenter(spec.path, threads=spec.threads, spin=spin, min_height_m=min_height_m)
         t1 = time.perf_counter()
         seg.predict(frames[0])
         t2 = time.perf_counter()

@@ -23,7 +23,7 @@ from typing import Any
 from edge.errors import DepthsegError, MissingExtraError
 
 __all__ = [
-    "add_recording_args",
+    "add_recording_args", "add_min_height_arg",
     "run", "fail", "print_json", "progress", "flag_names", "cli_message", "add_version", "require", "EXTRAS"]
 
 # pip extras of pyproject.toml [project.optional-dependencies] -> the modules they provide
@@ -89,6 +89,33 @@ def add_recording_args(parser: argparse.ArgumentParser, limit_help: str = "use a
     )
     parser.add_argument("--limit", type=int, default=None, metavar="N", help=limit_help)
     parser.add_argument("--threads", type=int, default=2, metavar="N", help="inference threads (default 2)")
+
+
+def _millimetres_as_metres(text: str) -> float:
+    from edge.cues import MAX_MIN_HEIGHT_M
+
+    try:
+        mm = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of millimetres, got {text!r}") from None
+    if not (0.0 <= mm <= MAX_MIN_HEIGHT_M * 1000):  # NaN fails too
+        raise argparse.ArgumentTypeError(f"must be from 0 (off) to {MAX_MIN_HEIGHT_M * 1000:g} mm, got {text}")
+    return mm / 1000.0
+
+
+def add_min_height_arg(parser: argparse.ArgumentParser, store: bool = False) -> None:
+    """``--min-height-mm MM`` (parsed to metres, ``args.min_height_m``; None = the model's rule).
+
+    One flag for eval, replay, bench (``store`` False: this run only) and export (``store`` True:
+    kept in the model's metadata); the rule is `edge.postprocess.remove_low_parts`.
+    """
+    what = "store in the exported model" if store else "for this run"
+    parser.add_argument(
+        "--min-height-mm", dest="min_height_m", type=_millimetres_as_metres, default=None, metavar="MM",
+        help=f"{what}: object pixels lower than MM above the table become table, in objects that reach higher "
+             "(objects wholly below stay); 10 gives the meaning of labels '> 10 mm above the floor plane'. "
+             "Default: the model's rule (0 = off, the simulator's meaning, unless stored otherwise)",
+    )
 
 
 def add_version(parser: argparse.ArgumentParser, prog: str) -> None:

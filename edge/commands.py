@@ -64,6 +64,7 @@ def evaluate_model(
     boundary_px: int = DEFAULT_BOUNDARY_PX,
     ignore_boundary: int | None = None,
     min_object_px: int | None = None,
+    min_height_m: float | None = None,
     wrap: Wrap | None = None,
 ) -> EvalReport:
     """Score ``model`` (default: the shipped ONNX, no torch) on the labelled recordings in ``data``.
@@ -74,8 +75,8 @@ def evaluate_model(
         threshold: decision boundary (None: the model's stored one).
         baseline: an `edge.baseline.PlaneBaseline` to score beside the model (needs open3d), or None.
         figures: directory for PNG overlays (created), or None.
-        max_figures, figures_pick, limit, boundary_px, ignore_boundary, min_object_px: as
-            `edge.evaluate.evaluate`.
+        max_figures, figures_pick, limit, boundary_px, ignore_boundary, min_object_px, min_height_m:
+            as `edge.evaluate.evaluate`.
         depth_topic, labels_topic: topics (None: detected).
         depth_scale: multiply decoded depth by this (0.001: millimetres stored as 32FC1).
         threads: inference threads.
@@ -107,6 +108,7 @@ def evaluate_model(
         predictor, _frames(wrap, frames, total, limit), threshold=threshold, baseline=baseline or False,
         figures_dir=figures, max_figures=max_figures, figure_pick=figures_pick, limit=limit,
         boundary_px=boundary_px, ignore_boundary=ignore_boundary, min_object_px=min_object_px,
+        min_height_m=min_height_m,
     )
     report.meta = predictor.meta
     return report

@@ -40,6 +40,7 @@ __all__ = [
     "robust_mean_std",
     "GRID_STRIDE",
     "N_HYPOTHESES",
+    "MAX_MIN_HEIGHT_M",
 ]
 
 CUES = ("height",)  # the cue channels a model may ask for, in ModelMeta.cues
@@ -53,6 +54,9 @@ BEYOND_WEIGHT = 0.5
 REFINE_ITERS = 2
 HEIGHT_SCALE = 100.0  # metres -> centimetres
 HEIGHT_CLIP = (-10.0, 30.0)
+# highest line of the minimum-object-height rule (`edge.postprocess.remove_low_parts`): well under
+# the clip's 30 cm, where every height reads the same
+MAX_MIN_HEIGHT_M = 0.2
 TRIM = (0.01, 0.99)  # robust standardisation: quantiles kept
 STATS_STRIDE = 4  # robust standardisation reads every 4th pixel in each direction
 

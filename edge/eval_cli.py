@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from edge.cliutil import add_recording_args, add_version, print_json, progress, run
+from edge.cliutil import add_min_height_arg, add_recording_args, add_version, print_json, progress, run
 from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, model_label
 from edge.metrics import ErrorBreakdown, MetricSummary
 
@@ -38,6 +38,7 @@ parser.add_argument(
     help="object specks (8-connected) under PX pixels become background (default: the model's rule, 6 px "
          "unless stored otherwise; 0 keeps every object pixel)",
 )
+add_min_height_arg(parser)
 parser.add_argument("--json", action="store_true", help="print one JSON object (fractions in [0, 1]) instead of a table")
 parser.add_argument("--figures", metavar="DIR", default=None, help="write PNG overlays like the paper's Fig. 5 here")
 parser.add_argument("--max-figures", type=int, default=8, metavar="N", help="number of figures to write (default 8)")
@@ -150,8 +151,10 @@ def format_table(report: EvalReport, model_name: str) -> str:
         ]
         lines += _score_rows([f"{n} [void band]" for n in names], ignored)
     notes = [
-        f"{report.frames} frames, threshold {report.threshold:g}, model's object specks under {report.min_object_px} px "
-        "removed; each score is the mean over frames in % "
+        f"{report.frames} frames, threshold {report.threshold:g}, "
+        + (f"model's object pixels under {report.min_height_m * 1000:g} mm above the support made table "
+           "(in objects reaching higher), " if report.min_height_m else "")
+        + f"model's object specks under {report.min_object_px} px removed; each score is the mean over frames in % "
         "(pooled IoU: over all valid pixels of all frames).",
     ]
     if report.metrics.skipped:
@@ -177,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
             labels_topic=args.labels_topic, depth_scale=args.depth_scale, limit=args.limit, threads=args.threads,
             boundary_px=args.boundary_px,
             ignore_boundary=args.ignore_boundary, min_object_px=args.min_object_px,
-            wrap=lambda frames, total: progress(frames, total=total, desc="eval", unit="frame"),
+            min_height_m=args.min_height_m, wrap=lambda frames, total: progress(frames, total=total, desc="eval", unit="frame"),
         )
         if args.json:
             print_json(report.to_dict())

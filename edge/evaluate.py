@@ -45,8 +45,8 @@ from edge.metrics import (
     object_mask,
     threshold_logit,
 )
-from edge.postprocess import check_min_px
-from edge.preprocess import standardize, valid_mask
+from edge.postprocess import check_min_height, check_min_px, support_height
+from edge.preprocess import standardize, valid_for, valid_mask
 
 __all__ = ["EvalReport", "evaluate", "render_figure", "COLORS", "model_label"]
 
@@ -70,6 +70,7 @@ class EvalReport:
     threshold: float
     metrics: MetricSummary
     min_object_px: int = 0  # the speck rule applied to the model's masks (edge.postprocess)
+    min_height_m: float = 0.0  # the height rule applied to them (edge.postprocess.remove_low_parts); 0 = off
     baseline: MetricSummary | None = None
     baseline_params: dict[str, Any] | None = None
     unlabelled: int = 0
@@ -87,7 +88,7 @@ class EvalReport:
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"model": self.model, "threshold": self.threshold, "min_object_px": self.min_object_px,
-                             "unlabelled_frames": self.unlabelled}
+                             "min_height_m": self.min_height_m, "unlabelled_frames": self.unlabelled}
         d.update(self.metrics.to_dict())
         self._add_extra_scores(d, self.breakdown, self.ignore_boundary)
         if self.baseline is not None:
@@ -225,6 +226,7 @@ def evaluate(
     boundary_px: int = DEFAULT_BOUNDARY_PX,
     ignore_boundary: int | None = None,
     min_object_px: int | None = None,
+    min_height_m: float | None = None,
 ) -> EvalReport:
     """Stream ``frames`` through ``predictor`` and score them (frames without labels are counted, not scored).
 
@@ -236,7 +238,9 @@ def evaluate(
     splits the errors into the breakdown (`edge.metrics.boundary_band`); ``ignore_boundary``
     (pixels, or None for off) adds a second set of scores with a void band of that width around
     the true boundaries left out, PASCAL VOC style. ``min_object_px`` defaults to the model's
-    speck rule (``meta.min_object_px``; `edge.postprocess`), else 0 (every object pixel kept).
+    speck rule (``meta.min_object_px``; `edge.postprocess`), else 0 (every object pixel kept);
+    ``min_height_m`` likewise to the model's height rule (``meta.min_height_m``), else 0 (off).
+    The plane fit is scored as it is, whatever the model's rules.
     """
     meta = getattr(predictor, "meta", None)
     if threshold is None:
@@ -245,6 +249,9 @@ def evaluate(
     if min_object_px is None:
         min_object_px = meta.min_object_px if meta is not None else 0
     min_object_px = check_min_px(min_object_px)  # before any frame is run
+    if min_height_m is None:
+        min_height_m = meta.min_height_m if meta is not None else 0.0
+    min_height_m = check_min_height(min_height_m)
     if figure_pick not in FIGURE_PICKS:
         raise ConfigError(f"unknown figure pick '{figure_pick}'; choose from {', '.join(FIGURE_PICKS)}")
     if max_figures < 0:
@@ -280,7 +287,9 @@ def evaluate(
             raise DataError(f"frame at t={fr.stamp_ns} ns: label shape {label.shape} differs from depth shape {depth.shape}")
         valid = valid_mask(depth)
         logits = checked_logits(predictor, depth)
-        pred = object_mask(logits, valid, threshold, min_object_px)
+        # the plane as the model's own preprocessing fits it (its sensor range), as `Segmenter` does
+        height = support_height(depth, valid_for(depth, meta) if meta is not None else valid) if min_height_m > 0 else None
+        pred = object_mask(logits, valid, threshold, min_object_px, height, min_height_m)
         outside_void = valid & ~boundary_band(label, ignore_boundary) if ignore_boundary is not None else None
         s = acc.add(pred, label, valid, outside_void)
         bpred = None
@@ -313,6 +322,7 @@ def evaluate(
         model=getattr(predictor, "name", "model"),
         threshold=float(threshold),
         min_object_px=min_object_px,
+        min_height_m=min_height_m,
         metrics=acc.plain.summary(),
         baseline=bacc.plain.summary() if bacc is not None else None,
         baseline_params=asdict(base) if base is not None else None,

@@ -25,12 +25,13 @@ from typing import Protocol
 
 import numpy as np
 
+from edge.cues import HEIGHT_SCALE
 from edge.defaults import resolve_model
 from edge.errors import ConfigError, DataError, ModelError
 from edge.io.paths import check_input_file
 from edge.meta import ModelMeta
 from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
-from edge.postprocess import check_min_px
+from edge.postprocess import check_min_height, check_min_px, support_height
 from edge.preprocess import preprocess_batch_for, preprocess_for, valid_for
 
 __all__ = [
@@ -80,6 +81,7 @@ class Prediction:
     timings: dict[str, float]  # ms: pre, infer, post, total
     logits: np.ndarray  # float32 H x W; the mask is `edge.metrics.segmentation_mask` of these
     graph_prob: np.ndarray | None = field(default=None, repr=False)  # a --with-preprocessing graph's own output
+    height_m: np.ndarray | None = field(default=None, repr=False)  # metres above the support, when the height rule is on
 
     @cached_property
     def prob(self) -> np.ndarray:
@@ -152,8 +154,10 @@ def _one_line(exc: BaseException) -> str:
 class Segmenter:
     """Object/table segmentation of raw depth frames with an exported ONNX model.
 
-    ``threshold`` and ``min_object_px`` override the ones stored in the model (for experiments;
-    ``min_object_px`` 0 keeps every object pixel); ``spin`` lets
+    ``threshold``, ``min_object_px`` and ``min_height_m`` override the ones stored in the model
+    (for experiments, or to choose what "object" means near the table: ``min_object_px`` 0 keeps
+    every object pixel, ``min_height_m`` 0.01 makes object pixels under 10 mm above the support
+    table, `edge.postprocess`); ``spin`` lets
     onnxruntime's worker threads busy-wait between kernels: it can shave a little latency on
     cores nobody else uses, and costs a lot on shared ones (see `session_options`).
     """
@@ -166,6 +170,7 @@ class Segmenter:
         providers: Sequence[str] = ("CPUExecutionProvider",),
         spin: bool = False,
         min_object_px: int | None = None,
+        min_height_m: float | None = None,
     ) -> None:
         import onnxruntime as ort
 
@@ -191,6 +196,7 @@ class Segmenter:
         if not 0.0 < self.threshold < 1.0:
             raise ConfigError(f"threshold must lie in (0, 1), got {self.threshold}")
         self.min_object_px = check_min_px(self.meta.min_object_px if min_object_px is None else min_object_px)
+        self.min_height_m = check_min_height(self.meta.min_height_m if min_height_m is None else min_height_m)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
         if len(inputs) != 1:
             raise ModelError(f"{path}: expected one input '{INPUT_NAME}', found {[i.name for i in inputs]}")
@@ -290,6 +296,7 @@ class Segmenter:
                 valid = outs[1][0].astype(bool, copy=False)
             else:
                 valid = valid_for(d, self.meta)
+            height = support_height(d, valid) if self.min_height_m > 0 else None
         else:
             pre = preprocess_for(d, self.meta)
             valid = pre.valid
@@ -298,10 +305,12 @@ class Segmenter:
             t2 = time.perf_counter()
             logits = check_logits(out[0, 0, :h, :w], self.name)
             graph_prob = None
+            height = self._height(d, pre) if self.min_height_m > 0 else None
         # The one threshold rule (edge.metrics): logits against logit(threshold), as eval, tune and
         # replay decide (float32 probabilities cannot separate thresholds near 1, 0.9999); then specks.
         mask = segmentation_mask(
-            logits, valid, self.threshold if threshold is None else float(threshold), self.min_object_px
+            logits, valid, self.threshold if threshold is None else float(threshold), self.min_object_px,
+            height, self.min_height_m,
         )
         t3 = time.perf_counter()
         timings = {
@@ -310,4 +319,12 @@ class Segmenter:
             "post": (t3 - t2) * 1e3,
             "total": (t3 - t0) * 1e3,
         }
-        return Prediction(mask=mask, valid=valid, timings=timings, logits=logits, graph_prob=graph_prob)
+        return Prediction(mask=mask, valid=valid, timings=timings, logits=logits, graph_prob=graph_prob, height_m=height)
+
+    def _height(self, depth: np.ndarray, pre) -> np.ndarray:
+        """Metres above the support for the height rule: the model's own height cue when it has
+        one (the same plane, no second fit), else `edge.postprocess.support_height`."""
+        if "height" in self.meta.cues:
+            h, w = depth.shape
+            return pre.x[self.meta.in_channels + self.meta.cues.index("height"), :h, :w] / np.float32(HEIGHT_SCALE)
+        return support_height(depth, pre.valid)

@@ -14,7 +14,7 @@ import numbers
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
-from edge.cues import CUES
+from edge.cues import CUES, MAX_MIN_HEIGHT_M
 from edge.errors import ModelError
 from edge.preprocess import STANDARDIZE_MODES
 from edge.values import is_finite, show
@@ -180,6 +180,9 @@ class ModelMeta:
     # after the threshold, object components (8-connected) under this many pixels become
     # background (edge.postprocess); 0 keeps every pixel. Models from before the rule get it too.
     min_object_px: int = MIN_OBJECT_PX
+    # then, object pixels lower than this (metres) above the dominant plane become table in
+    # components reaching over it (edge.postprocess.remove_low_parts); 0 = off, the simulator's meaning
+    min_height_m: float = 0.0
     sensor: SensorSpec = field(default_factory=SensorSpec)
     params: int = 0
     training: dict[str, Any] = field(default_factory=dict)
@@ -212,6 +215,7 @@ class ModelMeta:
         put(self, "threshold", _float("threshold", self.threshold, 0.0, 1.0, open_lo=True, open_hi=True))
         put(self, "threshold_policy", _str("threshold_policy", self.threshold_policy))
         put(self, "min_object_px", _int("min_object_px", self.min_object_px, 0, MAX_SENSOR_PIXELS))
+        put(self, "min_height_m", _float("min_height_m", self.min_height_m, 0.0, MAX_MIN_HEIGHT_M))
         if not isinstance(self.sensor, SensorSpec):
             raise _bad("sensor", self.sensor, "must be a sensor description (a JSON object)")
         put(self, "params", _int("params", self.params, 0, MAX_PARAMS))
@@ -234,6 +238,8 @@ class ModelMeta:
         d = asdict(self)
         if not self.full_skip:  # added later: models without it keep their metadata byte for byte
             del d["full_skip"]
+        if not self.min_height_m:  # likewise: models without the height rule keep their metadata
+            del d["min_height_m"]
         d["sensor"]["distortion"] = list(self.sensor.distortion)
         d["cues"] = list(self.cues)
         return d
@@ -283,7 +289,9 @@ class ModelMeta:
             "threshold": repr(float(self.threshold)),
             "threshold_policy": self.threshold_policy,
             "postprocessing": f"object (logit >= logit(threshold), valid) components, 8-connected, under "
-            f"{self.min_object_px} px -> background",
+            f"{self.min_object_px} px -> background"
+            + (f"; then object pixels under {self.min_height_m * 1000:g} mm above the dominant plane -> table "
+               "in components reaching over it" if self.min_height_m else ""),
             "encoder": self.encoder,
             "width": repr(float(self.width)),
             "in_channels": str(self.in_channels),

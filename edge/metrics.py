@@ -26,8 +26,9 @@ are background, all others object), evaluated as ``logit >= logit(threshold)``
 (`threshold_logit`, `predict_mask`, `segmentation_mask`). Comparing float32 probabilities
 instead gives other classes near extreme thresholds: at the paper's 0.9999 every logit above
 about 16 is a probability of exactly 1 in float32. After the threshold, object specks under the
-model's ``min_object_px`` become background (`object_mask`, `edge.postprocess`); tune chooses
-thresholds on the pixels before that rule. `UNKNOWN` (255) is the mask value of a pixel
+model's ``min_object_px`` become background (`object_mask`, `edge.postprocess`), and, when the
+model asks for a ``min_height_m``, object pixels under that line above the support become table
+in components reaching over it; tune chooses thresholds on the pixels before those rules. `UNKNOWN` (255) is the mask value of a pixel
 without valid depth; `sigmoid` and `logit` are the one pair of conversions.
 
 Where the errors are (`boundary_band`, `BreakdownAccumulator`): most disagreement between a
@@ -52,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from edge.errors import ConfigError, DataError
-from edge.postprocess import remove_specks
+from edge.postprocess import check_min_height, remove_low_parts, remove_specks
 
 __all__ = [
     "UNKNOWN",
@@ -162,8 +163,15 @@ def predict_mask(logits: np.ndarray, threshold: float = 0.5) -> np.ndarray:
     return x >= t
 
 
-def object_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5, min_object_px: int = 0) -> np.ndarray:
-    """Boolean object mask a model reports: `predict_mask` on valid pixels, specks removed.
+def object_mask(
+    logits: np.ndarray,
+    valid: np.ndarray,
+    threshold: float = 0.5,
+    min_object_px: int = 0,
+    height_m: np.ndarray | None = None,
+    min_height_m: float = 0.0,
+) -> np.ndarray:
+    """Boolean object mask a model reports: `predict_mask` on valid pixels, low parts and specks removed.
 
     Args:
         logits: float H x W.
@@ -171,15 +179,29 @@ def object_mask(logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5, m
         threshold: the decision boundary (a probability).
         min_object_px: object components (8-connected) with fewer pixels become background
             (`edge.postprocess.remove_specks`; ``ModelMeta.min_object_px``); 0 keeps all.
+        height_m: float H x W metres above the support (`edge.postprocess.support_height`);
+            needed when ``min_height_m`` > 0.
+        min_height_m: object pixels below this height become table in components that reach
+            above it (`edge.postprocess.remove_low_parts`; ``ModelMeta.min_height_m``); 0 = off.
     """
-    return remove_specks(predict_mask(logits, threshold) & np.asarray(valid, dtype=bool), min_object_px)
+    obj = predict_mask(logits, threshold) & np.asarray(valid, dtype=bool)
+    if check_min_height(min_height_m) > 0:
+        if height_m is None:
+            raise ConfigError("a minimum object height needs the heights above the support (`height_m`)")
+        obj = remove_low_parts(obj, height_m, min_height_m)
+    return remove_specks(obj, min_object_px)
 
 
 def segmentation_mask(
-    logits: np.ndarray, valid: np.ndarray, threshold: float = 0.5, min_object_px: int = 0
+    logits: np.ndarray,
+    valid: np.ndarray,
+    threshold: float = 0.5,
+    min_object_px: int = 0,
+    height_m: np.ndarray | None = None,
+    min_height_m: float = 0.0,
 ) -> np.ndarray:
     """The uint8 mask a user sees: 1 object, 0 background (`object_mask`), `UNKNOWN` where not ``valid``."""
-    mask = object_mask(logits, valid, threshold, min_object_px).astype(np.uint8)
+    mask = object_mask(logits, valid, threshold, min_object_px, height_m, min_height_m).astype(np.uint8)
     mask[~np.asarray(valid, dtype=bool)] = UNKNOWN
     return mask
 

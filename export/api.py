@@ -40,6 +40,7 @@ class ExportOptions:
     threads: int = 2
     force: bool = False
     min_object_px: int | None = None  # None = the checkpoint's speck rule (ModelMeta.min_object_px)
+    min_height_m: float | None = None  # None = the checkpoint's height rule (ModelMeta.min_height_m; 0 = off)
 
 
 def _split_encoder(name: str) -> tuple[str, bool]:
@@ -139,6 +140,8 @@ def export_model(opts: ExportOptions) -> dict[str, Any]:
     model, meta, name = load_source(opts)
     if opts.min_object_px is not None:
         meta = meta.with_(min_object_px=opts.min_object_px)  # checked like any metadata (ModelError)
+    if opts.min_height_m is not None:
+        meta = meta.with_(min_height_m=opts.min_height_m)
     source_channels = meta.in_channels
     if opts.single_channel:
         model, meta = to_single_channel(model, meta)

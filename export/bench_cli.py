@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from edge.cliutil import add_version, print_json, progress, run
+from edge.cliutil import add_min_height_arg, add_version, print_json, progress, run
 
 PROG = "depthseg-bench"
 
@@ -62,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--spin", action="store_true",
                    help="let onnxruntime's worker threads busy-wait between kernels (off by default: on a CPU shared with "
                         "other work it made frames 3-4x slower here)")
+    add_min_height_arg(p)
     p.add_argument("--torch", action="store_true", help="also time PyTorch eager for each model's architecture (imports torch)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     return p
@@ -110,7 +111,9 @@ def format_report(res: dict[str, Any]) -> str:
         f"CPU: {cpu['model']} ({cpu['usable_cpus']} usable of {cpu['logical_cpus']} logical CPUs); ISA: {' '.join(cpu['isa'])}",
         f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin"
         + (f" in blocks of {res['block']} runs" if res.get("block", 1) > 1 else " (models alternate every frame)")
-        + (f", paced at {res['rate_hz']:g} frames/s" if res.get("rate_hz") else ", back to back"),
+        + (f", paced at {res['rate_hz']:g} frames/s" if res.get("rate_hz") else ", back to back")
+        + (f"; every model's object pixels under {res['min_height_m'] * 1000:g} mm above the support made table"
+           if res.get("min_height_m") else ""),
         "times in ms; 'inf' = session.run only; 'frame' = raw depth -> mask (pre + inf + post); fps = 1000 / mean frame ms; "
         "'x first' = frame p50 / the first model's",
     ]
@@ -133,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             res = benchmark(args.model, compare=args.compare, threads=args.threads if len(args.threads) > 1 else args.threads[0], runs=args.runs,
                             warmup=args.warmup, data=args.data, frames=args.frames, seed=args.seed, spin=args.spin,
-                            torch=args.torch, block=args.block, rate=args.rate, on_round=lambda _r: bar.update(1))
+                            torch=args.torch, block=args.block, rate=args.rate,
+                            min_height_m=args.min_height_m, on_round=lambda _r: bar.update(1))
         finally:
             bar.close()
         if args.json:

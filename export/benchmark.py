@@ -45,6 +45,7 @@ def benchmark(
     on_round: Callable[[int], None] | None = None,
     block: int | None = None,
     rate: float | None = None,
+    min_height_m: float | None = None,
 ) -> dict[str, Any]:
     """Time models round-robin on this CPU (`edge.bench.bench_models`); the ``depthseg-bench --json`` object.
 
@@ -65,6 +66,8 @@ def benchmark(
             `edge.bench.DEFAULT_BLOCK`; see `edge.bench.bench_models`).
         rate: pace the timed frames at this many frames/s, as the sensor delivers them (None
             or 0: back to back).
+        min_height_m: the height rule for every model of this run (None: each model's own;
+            `edge.postprocess.remove_low_parts`).
 
     Returns:
         ``cpu``, ``runtime``, ``threads``, ``runs``, ``warmup``, ``rate_hz``, ``frames`` (their source), ``peak_rss_mb``,
@@ -116,7 +119,7 @@ def benchmark(
         suffix = (lambda t: f" t{t}") if len(counts) > 1 else (lambda t: "")
         specs = [ModelSpec(p, name=name + suffix(t), threads=t) for p, name in named for t in counts]
         results = bench_models(specs, sample.depth, runs=runs, warmup=warmup, spin=spin, on_round=on_round,
-                               block=block, rate=rate)
+                               block=block, rate=rate, min_height_m=min_height_m)
         if torch:
             from edge.infer import Segmenter
             from edge.train.timing import time_torch
@@ -134,6 +137,7 @@ def benchmark(
         "warmup": warmup,
         "block": block,
         "rate_hz": rate,
+        "min_height_m": min_height_m,  # None: each model's own height rule
         "frames": sample.source,
         "peak_rss_mb": peak_rss_mb(),
         "models": results,

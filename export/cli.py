@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from edge.cliutil import add_version, print_json, run
+from edge.cliutil import add_min_height_arg, add_version, print_json, run
 
 PROG = "depthseg-export"
 
@@ -60,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-object-px", type=int, default=None, metavar="PX",
                    help="store this speck rule in the exported model: object components under PX pixels become "
                         "background (default: the checkpoint's, 6 px unless it says otherwise; 0 = off)")
+    add_min_height_arg(p, store=True)
     p.add_argument("--force", action="store_true", help="keep an int8 model even when it loses more than 0.5 IoU points")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     return p

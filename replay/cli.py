@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from edge.cliutil import add_version, print_json, progress, run
+from edge.cliutil import add_min_height_arg, add_version, print_json, progress, run
 from edge.errors import ConfigError, ModelError
 
 PROG = "depthseg-replay"
@@ -93,6 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--min-object-px", type=int, default=None, metavar="PX",
                    help="object specks (8-connected) under PX pixels become background (default: the model's rule; "
                         "0 keeps every object pixel)")
+    add_min_height_arg(p)
     p.add_argument("--threads", type=int, default=2, help="onnxruntime intra-op threads (default 2)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (frames, fps, p50_ms, ... and iou, precision, recall, "
@@ -160,7 +161,8 @@ def _body(args: argparse.Namespace) -> int:
     )
     if args.out is not None:
         check_output_topics(stream.topics, args.out_namespace)
-    seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold, min_object_px=args.min_object_px)
+    seg = Segmenter(args.model, threads=args.threads, threshold=args.threshold, min_object_px=args.min_object_px,
+                    min_height_m=args.min_height_m)
     _note(f"depth topic {stream.depth_topic} ({stream.depth_reason})")
     _note(f"labels: {stream.labels_topic or 'none (no scores)'}")
     s = seg.meta.sensor

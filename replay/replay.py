@@ -69,6 +69,7 @@ class _Prediction(Protocol):
 class _Segmenter(Protocol):
     threshold: float
     min_object_px: int  # the speck rule of its masks (edge.postprocess); a threshold override keeps it
+    # (and ``min_height_m``, the height rule, when the segmenter has one: `edge.infer.Segmenter`)
 
     def predict(self, depth: np.ndarray) -> _Prediction: ...
 
@@ -142,6 +143,7 @@ class ReplaySummary:
     seconds: float
     latency: LatencyHistogram
     threshold: float
+    min_height_m: float = 0.0  # the height rule of the masks (edge.postprocess.remove_low_parts); 0 = off
     depth_topic: str = ""
     labels_topic: str | None = None
     labelled_frames: int = 0
@@ -176,6 +178,7 @@ class ReplaySummary:
             "mean_ms": num(lat.mean),
             "max_ms": num(lat.max_ms) if lat.n else None,
             "threshold": self.threshold,
+            "min_height_m": self.min_height_m,
             "depth_topic": self.depth_topic,
             "labels_topic": self.labels_topic,
             "unknown_fraction": num(self.unknown_fraction),
@@ -213,7 +216,8 @@ class ReplaySummary:
             f"latency ms: p50 {lat.percentile(50):.2f}  p90 {lat.percentile(90):.2f}  p99 {lat.percentile(99):.2f}"
             f"  max {lat.max_ms:.2f}" if lat.n else "latency ms: n/a",
             f"unknown (invalid depth) pixels: {100 * self.unknown_fraction:.1f} %; "
-            f"object share of valid pixels: {100 * self.object_fraction:.1f} %  (threshold {self.threshold:g})",
+            f"object share of valid pixels: {100 * self.object_fraction:.1f} %  (threshold {self.threshold:g}"
+            + (f", under {self.min_height_m * 1000:g} mm above the table made table" if self.min_height_m else "") + ")",
         ]
         if self.rate is not None:
             skipped = f"; {self.gaps_skipped} gaps over {MAX_GAP_S:g} s skipped" if self.gaps_skipped else ""
@@ -231,16 +235,17 @@ class ReplaySummary:
         return out
 
 
-def _mask_for(pred: _Prediction, threshold: float | None, min_object_px: int) -> np.ndarray:
+def _mask_for(pred: _Prediction, threshold: float | None, min_object_px: int, min_height_m: float = 0.0) -> np.ndarray:
     """The segmenter's mask, or (with a ``threshold`` of the caller's) the one threshold rule of
-    `edge.metrics` applied to its logits, then the segmenter's speck rule, so a replay at 0.9999
-    agrees with the Segmenter, eval and tune."""
+    `edge.metrics` applied to its logits, then the segmenter's height and speck rules, so a replay
+    at 0.9999 agrees with the Segmenter, eval and tune."""
     if threshold is None:
         return np.asarray(pred.mask, dtype=np.uint8)
     logits = getattr(pred, "logits", None)
     if logits is None:
         logits = logit(np.asarray(pred.prob, dtype=np.float32))
-    return segmentation_mask(logits, pred.valid, threshold, min_object_px)
+    return segmentation_mask(logits, pred.valid, threshold, min_object_px, getattr(pred, "height_m", None),
+                             min_height_m)
 
 
 def replay(
@@ -329,7 +334,7 @@ def replay(
                 t0 = time.perf_counter()
                 pred = segmenter.predict(fr.depth)
                 ms = (time.perf_counter() - t0) * 1e3
-                mask = _mask_for(pred, over, segmenter.min_object_px)
+                mask = _mask_for(pred, over, segmenter.min_object_px, getattr(segmenter, "min_height_m", 0.0))
                 lat.add(ms)
                 for k, v in (getattr(pred, "timings", None) or {}).items():
                     stage_sums[k] = stage_sums.get(k, 0.0) + float(v)
@@ -382,6 +387,7 @@ def replay(
         seconds=seconds,
         latency=lat,
         threshold=thr,
+        min_height_m=float(getattr(segmenter, "min_height_m", 0.0)),
         depth_topic=getattr(stream, "depth_topic", ""),
         labels_topic=getattr(stream, "labels_topic", None),
         labelled_frames=labelled,

@@ -58,6 +58,17 @@ def test_export_stores_the_speck_rule_asked_for(capsys, tmp_path):
     assert not (tmp_path / "x.onnx").exists()
 
 
+def test_export_stores_the_height_rule_asked_for(capsys, tmp_path):
+    model, meta = tiny_model(3, in_channels=3)
+    ckpt = save_checkpoint(tmp_path / "tiny.pt", model, meta)
+    out = tmp_path / "tiny.onnx"
+    rc = main(["--model", str(ckpt), "--out", str(out), "--check-frames", "2", "--threads", "1", "--min-height-mm", "10"])
+    assert rc == 0, capsys.readouterr().err
+    seg = Segmenter(out, threads=1)
+    assert seg.meta.min_height_m == 0.01 == seg.min_height_m and "under 10 mm" in seg.props["postprocessing"]
+    assert Segmenter(out, threads=1, min_height_m=0.0).min_height_m == 0.0  # a run may switch it off
+
+
 def test_missing_checkpoint_is_one_line(capsys, tmp_path):
     rc = main(["--model", str(tmp_path / "nope.pt"), "--out", str(tmp_path / "x.onnx")])
     _one_line_error(capsys, rc, "nope.pt", "no such checkpoint")

@@ -166,3 +166,24 @@ def test_exported_fcn_replays_like_depthseg_eval(tmp_path, capsys, tiny_onnx):
     for k in ("iou", "precision", "recall", "pixel_accuracy"):
         assert got[k] == pytest.approx(ref[k], abs=1e-3), k
     assert np.isfinite(got["p99_ms"])
+
+
+def test_min_height_flag_makes_low_object_pixels_table(tmp_path, capsys):
+    # a model that calls every valid pixel object, the table too: the height rule
+    # (edge.postprocess.remove_low_parts) must leave the box, which reaches over the line
+    from onnxgen import linear_model
+
+    model = linear_model(tmp_path / "all.onnx", bias=100.0)
+    rec = write_kind("ros32_zero", tmp_path / "r.mcap", n=3)
+    res = {}
+    for mm in ("0", "10"):
+        rc, out, err = run_cli(capsys, rec.path, "--model", model, "--json", "--min-height-mm", mm)
+        assert rc == 0, err
+        res[mm] = json.loads(out)
+    assert res["0"]["object_fraction"] == 1.0 and res["0"]["min_height_m"] == 0.0
+    assert res["10"]["min_height_m"] == 0.01 and 0.0 < res["10"]["object_fraction"] < 0.2
+    assert res["10"]["iou"] > 0.9 > res["0"]["iou"]
+    with pytest.raises(SystemExit) as e:  # argparse's one-line usage error
+        run_cli(capsys, rec.path, "--model", model, "--min-height-mm", "nan")
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--min-height-mm" in err and "Traceback" not in err

@@ -1,0 +1,135 @@
+"""The minimum-object-height rule (edge.postprocess.remove_low_parts) and every path that applies it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from onnxgen import linear_model
+
+from edge.cues import fit_dominant_plane
+from edge.errors import ConfigError, ModelError
+from edge.infer import UNKNOWN, Segmenter
+from edge.meta import ModelMeta
+from edge.metrics import object_mask, segmentation_mask
+from edge.postprocess import check_min_height, remove_low_parts, support_height
+from edge.sampleframes import synthetic_frames
+
+
+def _scene() -> tuple[np.ndarray, np.ndarray]:
+    """A mask with a box (40 mm high, a 1 px fringe at 2 mm and a 6 mm base ring) and a 4 mm plate."""
+    h = np.zeros((30, 40), np.float32)
+    obj = np.zeros((30, 40), bool)
+    obj[4:16, 4:16] = True  # the box and its fringe
+    h[5:15, 5:15] = 0.006  # base ring
+    h[6:14, 6:14] = 0.040  # top
+    h[4, 4:16] = h[15, 4:16] = 0.002  # fringe rows at table level
+    obj[20:26, 25:35] = True
+    h[20:26, 25:35] = 0.004  # a plate wholly below 10 mm
+    return obj, h
+
+
+def test_low_parts_of_objects_reaching_over_the_line_become_table_and_low_objects_stay() -> None:
+    obj, h = _scene()
+    out = remove_low_parts(obj, h, 0.010)
+    assert out[6:14, 6:14].all()  # the top stays
+    assert not out[4:16, 4:16][~np.pad(np.ones((8, 8), bool), 2)].any()  # fringe and base ring: table
+    assert out[20:26, 25:35].all()  # the plate (every pixel under the line) stays object
+    assert out.sum() == 64 + 60
+    assert obj.sum() == 144 + 60  # the input is not modified
+    assert np.array_equal(remove_low_parts(obj, h, 0.005), obj & ~((h < 0.005) & (np.arange(30)[:, None] < 18)))
+    assert remove_low_parts(obj, h, 0.0) is not None and np.array_equal(remove_low_parts(obj, h, 0.0), obj)
+
+
+def test_bad_lines_and_shapes_are_refused_in_one_line() -> None:
+    obj, h = _scene()
+    for bad in (-0.001, 0.5, float("nan"), "x"):
+        with pytest.raises(ConfigError, match="min_height_m"):
+            check_min_height(bad)
+    with pytest.raises(ConfigError, match="shape"):
+        remove_low_parts(obj, h[:10], 0.01)
+    logits = np.where(obj, 3.0, -3.0).astype(np.float32)
+    with pytest.raises(ConfigError, match="height_m"):
+        object_mask(logits, np.ones_like(obj), 0.5, 0, None, 0.01)
+
+
+def test_masks_apply_the_height_rule_before_the_speck_rule() -> None:
+    obj, h = _scene()
+    obj[17, 2] = True  # a 1 px speck at table level, alone: wholly low, so only the speck rule removes it
+    logits = np.where(obj, 3.0, -3.0).astype(np.float32)
+    valid = np.ones(obj.shape, bool)
+    valid[0, 0] = False
+    got = object_mask(logits, valid, 0.5, 6, h, 0.010)
+    assert got.sum() == 64 + 60 and not got[17, 2]
+    seg = segmentation_mask(logits, valid, 0.5, 6, h, 0.010)
+    assert seg[0, 0] == UNKNOWN and np.array_equal(seg[valid] == 1, got[valid])
+
+
+def test_support_height_is_the_height_cue_plane_in_metres() -> None:
+    d = synthetic_frames(1, 3).depth[0]
+    valid = d > 0
+    h = support_height(d, valid)
+    fit = fit_dominant_plane(d, valid)
+    expect = np.clip(fit.depth(d.shape) - d, -0.1, 0.3)
+    np.testing.assert_allclose(h[valid], expect[valid], atol=1e-5)
+    assert h.dtype == np.float32 and (h[~valid] == 0).all()
+
+
+def test_metadata_carries_the_rule_and_old_models_keep_their_bytes() -> None:
+    assert ModelMeta().min_height_m == 0.0 and "min_height_m" not in ModelMeta().to_dict()
+    m = ModelMeta(min_height_m=0.01)
+    assert ModelMeta.from_json(m.to_json()).min_height_m == 0.01
+    assert "under 10 mm" in m.onnx_props()["postprocessing"]
+    for bad in (-0.01, 0.3, True, "0.01"):
+        with pytest.raises(ModelError, match="min_height_m"):
+            ModelMeta(min_height_m=bad)
+
+
+@pytest.mark.parametrize("stored", [0.0, 0.01])
+def test_segmenter_applies_the_stored_rule_or_an_override(tmp_path, stored) -> None:
+    path = linear_model(tmp_path / "m.onnx", bias=1.2)
+    if stored:  # the rule stored in the model's metadata, as `depthseg-export --min-height-mm` does
+        import onnx
+
+        from edge.meta import META_KEY
+
+        mod = onnx.load(str(path))
+        props = {p.key: p for p in mod.metadata_props}
+        meta = ModelMeta.from_json(props[META_KEY].value).with_(min_height_m=stored)
+        props[META_KEY].value = meta.to_json()
+        onnx.save(mod, str(path))
+    d = synthetic_frames(2, 5).depth[1]
+    on = Segmenter(path, threads=1) if stored else Segmenter(path, threads=1, min_height_m=0.01)
+    off = Segmenter(path, threads=1, min_height_m=0.0)
+    p, q = on.predict(d), off.predict(d)
+    assert on.min_height_m == 0.01 and off.min_height_m == 0.0 and q.height_m is None
+    np.testing.assert_array_equal(p.height_m, support_height(d, p.valid))
+    want = segmentation_mask(q.logits, q.valid, on.threshold, on.min_object_px, p.height_m, 0.01)
+    np.testing.assert_array_equal(p.mask, want)
+    assert (p.mask == 1).sum() < (q.mask == 1).sum()  # the rule removed something: not vacuous
+
+
+def test_eval_cli_reports_the_rule_and_refuses_bad_millimetres(capsys, linear_onnx, tmp_path) -> None:
+    from replaygen import scene
+
+    from edge.eval_cli import main
+    from edge.io import FrameWriter
+    from edge.meta import fov_intrinsics
+
+    data = tmp_path / "a.mcap"
+    with FrameWriter(data) as w:
+        for i in range(3):
+            d, lab = scene(i, 64, 96, box=True)
+            w.write(i * 100_000_000, d, lab, intrinsics=fov_intrinsics(96, 64, 62.0, 45.0))
+    scores = {}
+    for mm in ("0", "10"):
+        rc = main(["--model", str(linear_onnx), "--data", str(data), "--min-height-mm", mm, "--json"])
+        out = capsys.readouterr()
+        assert rc == 0, out.err
+        scores[mm] = json.loads(out.out)
+    assert scores["0"]["min_height_m"] == 0.0 and scores["10"]["min_height_m"] == 0.01
+    with pytest.raises(SystemExit) as e:
+        main(["--model", str(linear_onnx), "--data", str(data), "--min-height-mm", "-3"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "--min-height-mm" in err and "from 0 (off) to 200 mm" in err and "Traceback" not in err
