@@ -10,6 +10,10 @@ that are missing (simulated from seed 2 or 4, never used in training or tuning; 
 the real capture are imported from ``../shared/data``).
 
     .venv/bin/python tools/results_table.py [--model M] [--make-data] [--only NAME ...] [--out FILE.md]
+    .venv/bin/python tools/results_table.py --min-height-mm 10   # the model with the height rule on
+
+``--min-height-mm`` passes the minimum-object-height rule to every ``depthseg-eval`` run (the
+model's masks only; `edge.postprocess.remove_low_parts`): the meaning of the real capture's labels.
 """
 
 from __future__ import annotations
@@ -74,8 +78,10 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.2f}"
 
 
-def evaluate(model: str | None, data: str, threshold: float | None) -> dict:
+def evaluate(model: str | None, data: str, threshold: float | None, min_height_mm: float | None = None) -> dict:
     cmd = [str(BIN / "depthseg-eval"), "--data", data, "--baseline", "--json"]
+    if min_height_mm is not None:
+        cmd += ["--min-height-mm", f"{min_height_mm:g}"]
     if model:
         cmd += ["--model", model]
     if threshold is not None:
@@ -104,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model", help="model file (default: the shipped model)")
     ap.add_argument("--threshold", type=float, help="decision boundary (default: the model's stored one)")
+    ap.add_argument("--min-height-mm", type=float, metavar="MM",
+                    help="the model's minimum object height for every row (default: the model's rule)")
     ap.add_argument("--make-data", action="store_true", help="create missing data sets first")
     ap.add_argument("--only", nargs="+", metavar="PREFIX", help="only data sets whose name starts with one of these")
     ap.add_argument("--out", type=Path, help="also write the markdown table here")
@@ -123,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for make in makes:
                 subprocess.run(make, cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
-        lines.append(row(name, evaluate(args.model, path, args.threshold)))
+        lines.append(row(name, evaluate(args.model, path, args.threshold, args.min_height_mm)))
         print(lines[-1], flush=True)
     text = "\n".join(lines) + "\n"
     print("\n" + text)
