@@ -102,7 +102,9 @@ def evaluate_model(
         require("sim", ("open3d",), "the plane baseline (`baseline`)")
     from edge.io import open_frames
 
-    frames, total = open_frames(data, depth_topic, labels_topic, require_labels=True, depth_scale=depth_scale)
+    # the scene records say what the labels mean, when a recording says it (`edge.evaluate.declared_labels`)
+    frames, total = open_frames(data, depth_topic, labels_topic, require_labels=True, depth_scale=depth_scale,
+                                extras=("scene",))
     predictor = load_predictor(model_path, threads=threads)
     report = evaluate(
         predictor, _frames(wrap, frames, total, limit), threshold=threshold, baseline=baseline or False,

@@ -157,6 +157,7 @@ def format_table(report: EvalReport, model_name: str) -> str:
         + f"model's object specks under {report.min_object_px} px removed; each score is the mean over frames in % "
         "(pooled IoU: over all valid pixels of all frames).",
     ]
+    notes += _labels_notes(report)
     if report.metrics.skipped:
         notes.append(f"{report.metrics.skipped} frames without valid pixels were not scored.")
     if report.unlabelled:
@@ -164,6 +165,21 @@ def format_table(report: EvalReport, model_name: str) -> str:
     if report.figures:
         notes.append(f"{len(report.figures)} figures written to {report.figures[0].parent}")
     return "\n".join(lines + [""] + notes)
+
+
+def _labels_notes(report) -> list[str]:
+    """What the recording says its labels are, and the flag that scores the model in that meaning."""
+    from edge.evaluate import labels_line_mm
+
+    out = [f"labels, as the recording describes them: {text}" for text in report.labels_declared]
+    lines = {labels_line_mm(t) for t in report.labels_declared} - {None}
+    if len(lines) == 1 and not report.min_height_m:
+        mm = lines.pop()
+        out.append(
+            f"note: these labels call the lowest {mm:g} mm of every object table, the model's training labels call "
+            f"it object; --min-height-mm {mm:g} scores the model with the labels' meaning (README, 'Results')"
+        )
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

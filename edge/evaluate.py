@@ -21,6 +21,7 @@ panel shows its prediction in the same colours.
 from __future__ import annotations
 
 import heapq
+import re
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -48,7 +49,34 @@ from edge.metrics import (
 from edge.postprocess import check_min_height, check_min_px, support_height
 from edge.preprocess import standardize, valid_for, valid_mask
 
-__all__ = ["EvalReport", "evaluate", "render_figure", "COLORS", "model_label"]
+__all__ = ["EvalReport", "evaluate", "render_figure", "COLORS", "model_label", "declared_labels", "labels_line_mm"]
+
+MAX_DECLARED = 4  # distinct label descriptions kept from a recording (memory stays bounded)
+MAX_DECLARED_CHARS = 200
+
+
+def declared_labels(scene: dict[str, Any] | None) -> str | None:
+    """What a frame's scene record says its labels are, if it says (else None).
+
+    ``depthseg-sim import ply --label-above-plane`` writes it under ``params.labels``,
+    `tools/relabel_geometric.py` under ``labels``; simulated frames say nothing (their labels are
+    the simulator's: every pixel of an object).
+
+    Args:
+        scene: the frame's ``/depthseg/scene`` record (`edge.io.Frame.scene`).
+    """
+    if not isinstance(scene, dict):
+        return None
+    params = scene.get("params")
+    text = scene.get("labels", params.get("labels") if isinstance(params, dict) else None)
+    return " ".join(text.split())[:MAX_DECLARED_CHARS] if isinstance(text, str) and text.strip() else None
+
+
+def labels_line_mm(text: str) -> float | None:
+    """The line of a geometric label description ("geometric: > 10 mm above ..." -> 10.0), else None."""
+    m = re.match(r"geometric: > ([0-9]+(?:\.[0-9]+)?) mm above", text)
+    return float(m.group(1)) if m else None
+
 
 # RGB
 COLORS: dict[str, tuple[int, int, int]] = {
@@ -71,6 +99,7 @@ class EvalReport:
     metrics: MetricSummary
     min_object_px: int = 0  # the speck rule applied to the model's masks (edge.postprocess)
     min_height_m: float = 0.0  # the height rule applied to them (edge.postprocess.remove_low_parts); 0 = off
+    labels_declared: list[str] = field(default_factory=list)  # what the recording says its labels are (`declared_labels`)
     baseline: MetricSummary | None = None
     baseline_params: dict[str, Any] | None = None
     unlabelled: int = 0
@@ -88,7 +117,8 @@ class EvalReport:
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"model": self.model, "threshold": self.threshold, "min_object_px": self.min_object_px,
-                             "min_height_m": self.min_height_m, "unlabelled_frames": self.unlabelled}
+                             "min_height_m": self.min_height_m,
+                             "labels_declared": list(self.labels_declared), "unlabelled_frames": self.unlabelled}
         d.update(self.metrics.to_dict())
         self._add_extra_scores(d, self.breakdown, self.ignore_boundary)
         if self.baseline is not None:
@@ -269,6 +299,7 @@ def evaluate(
     acc = _MethodScores(boundary_px, ignore_boundary)
     bacc = _MethodScores(boundary_px, ignore_boundary) if base is not None else None
     unlabelled = 0
+    declared: list[str] = []
     seen = 0
     figures: list[Path] = []
     worst: list[tuple[float, int, tuple]] = []  # min-heap on -iou: the worst frames so far
@@ -281,6 +312,9 @@ def evaluate(
         if fr.label is None:
             unlabelled += 1
             continue
+        said = declared_labels(fr.scene)
+        if said is not None and said not in declared and len(declared) < MAX_DECLARED:
+            declared.append(said)
         depth = np.asarray(fr.depth)
         label = np.asarray(fr.label)
         if label.shape != depth.shape:
@@ -323,6 +357,7 @@ def evaluate(
         threshold=float(threshold),
         min_object_px=min_object_px,
         min_height_m=min_height_m,
+        labels_declared=declared,
         metrics=acc.plain.summary(),
         baseline=bacc.plain.summary() if bacc is not None else None,
         baseline_params=asdict(base) if base is not None else None,

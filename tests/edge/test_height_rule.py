@@ -133,3 +133,37 @@ def test_eval_cli_reports_the_rule_and_refuses_bad_millimetres(capsys, linear_on
         main(["--model", str(linear_onnx), "--data", str(data), "--min-height-mm", "-3"])
     err = capsys.readouterr().err
     assert e.value.code == 2 and "--min-height-mm" in err and "from 0 (off) to 200 mm" in err and "Traceback" not in err
+
+
+def test_declared_labels_are_read_from_both_layouts() -> None:
+    from edge.evaluate import declared_labels, labels_line_mm
+
+    text = "geometric: > 10 mm above the RANSAC floor plane"
+    assert declared_labels({"labels": text}) == text == declared_labels({"params": {"labels": text}})
+    assert declared_labels(None) is None and declared_labels({"params": {"seed": 1}}) is None
+    assert declared_labels({"labels": ["not", "text"]}) is None and declared_labels({"params": "x"}) is None
+    assert len(declared_labels({"labels": "x" * 10_000})) == 200
+    assert labels_line_mm(text) == 10.0 and labels_line_mm("geometric: > 7.5 mm above it") == 7.5
+    assert labels_line_mm("simulator ids") is None
+
+
+def test_eval_names_the_labels_meaning_and_the_flag_for_it(capsys, linear_onnx, tmp_path) -> None:
+    from replaygen import scene
+
+    from edge.eval_cli import main
+    from edge.io import FrameWriter
+    from edge.meta import fov_intrinsics
+
+    data = tmp_path / "geo.mcap"
+    with FrameWriter(data) as w:
+        for i in range(2):
+            d, lab = scene(i, 64, 96, box=True)
+            w.write(i * 100_000_000, d, lab, intrinsics=fov_intrinsics(96, 64, 62.0, 45.0),
+                    scene={"index": i, "params": {"labels": "geometric: > 10 mm above the RANSAC floor plane"}})
+    assert main(["--model", str(linear_onnx), "--data", str(data)]) == 0
+    out = capsys.readouterr().out
+    assert "labels, as the recording describes them: geometric: > 10 mm" in out
+    assert "--min-height-mm 10 scores the model with the labels' meaning" in out
+    assert main(["--model", str(linear_onnx), "--data", str(data), "--min-height-mm", "10", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["labels_declared"] == ["geometric: > 10 mm above the RANSAC floor plane"] and d["min_height_m"] == 0.01
