@@ -19,8 +19,9 @@ How, in constant memory (never a list of pixels or frames):
   histograms (pooled IoU). Cost per frame: one ``searchsorted`` over its valid pixels.
 - A pixel is object when ``logit >= edge``, exactly as `edge.metrics.predict_mask` decides
   with the stored probability ``sigmoid(edge)``.
-- The speck rule that follows the threshold (`edge.postprocess`, ``ModelMeta.min_object_px``)
-  is not in these scores: binned logits cannot see connected components. They are the numbers
+- The speck rule that follows the threshold (`edge.postprocess`, ``ModelMeta.min_object_px``),
+  and the height rule when a model has one (``ModelMeta.min_height_m``), are not in these scores:
+  binned logits cannot see connected components. They are the numbers
   ``depthseg-eval --min-object-px 0`` prints; with the rule eval's are equal or higher where
   specks were false objects (on frames without objects, much higher).
 
