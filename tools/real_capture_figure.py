@@ -2,12 +2,14 @@
 """The paper's Fig. 6 on our model: predictions on a real pico flexx capture (no labels).
 
 Panels: the preprocessed input, the model's mask at the stored threshold, at 0.5 and at the
-paper's 0.9999, and the RANSAC floor-plane baseline (the only reference we have without labels).
+paper's 0.9999, the RANSAC floor-plane baseline (the only reference we have without labels), and
+the model's mask with the height rule (`--min-height-mm`, default 10: the labels' meaning of the
+real capture; `edge.postprocess.remove_low_parts`: the stored threshold, the height rule, the speck rule).
 The last line of the figure gives, per panel, the object share and the agreement (IoU) with the
 baseline, so "looks right" comes with a number. Reads the royaleviewer PLY from ../shared at run
 time (nothing from it is committed but this figure). Torch-free (edge path).
 
-    .venv/bin/python tools/real_capture_figure.py [--ply FILE] [--model M.onnx] [--out docs/real_capture.png]
+    .venv/bin/python tools/real_capture_figure.py [--ply FILE] [--model M.onnx] [--rule-mm 10] [--out docs/real_capture.png]
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--ply", type=Path, default=DEFAULT_PLY)
     p.add_argument("--model", type=Path, default=None, help="ONNX model (default: the shipped one)")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "real_capture.png")
+    p.add_argument("--rule-mm", type=float, default=10.0, help="the height rule's line of the last panel (default 10)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
 
@@ -69,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
             panels.append((label, m))
         stats["RANSAC baseline"] = {"object_share": float(base[valid].mean()), "iou_vs_baseline": 1.0}
         panels.append(("RANSAC baseline", base))
+        ruled = Segmenter(args.model, threads=2, min_height_m=args.rule_mm / 1000.0).predict(depth).mask == 1
+        label = f"model, height rule {args.rule_mm:g} mm"
+        stats[label] = {"object_share": float(ruled[valid].mean()), "iou_vs_baseline": _iou(ruled, base, valid)}
+        panels.append((label, ruled))
 
         x = preprocess(depth).x[0][: depth.shape[0], : depth.shape[1]]
         g = np.clip((x + 2.5) / 5.0, 0, 1)
@@ -89,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                 cv2.putText(img, txt, (8, 34), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
             tiles.append(img)
         row1 = np.hstack(tiles[:3])
-        row2 = np.hstack(tiles[3:] + [np.full_like(tiles[0], 255)])
+        row2 = np.hstack(tiles[3:6])
         sheet = np.vstack([row1, row2])
         args.out.parent.mkdir(parents=True, exist_ok=True)
         ok, buf = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
