@@ -167,3 +167,19 @@ def test_eval_names_the_labels_meaning_and_the_flag_for_it(capsys, linear_onnx, 
     assert main(["--model", str(linear_onnx), "--data", str(data), "--min-height-mm", "10", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["labels_declared"] == ["geometric: > 10 mm above the RANSAC floor plane"] and d["min_height_m"] == 0.01
+
+
+def test_a_model_with_the_height_cue_reuses_it_and_a_raw_graph_fits_the_plane(tmp_path) -> None:
+    # the shipped model takes the height cue: the rule reads that channel (no second plane fit);
+    # a --with-preprocessing graph returns no cue, so the rule fits the plane itself: same heights
+    from onnxgen import raw_model
+
+    d = synthetic_frames(1, 11).depth[0]
+    shipped = Segmenter(None, threads=1, min_height_m=0.01)
+    assert "height" in shipped.meta.cues
+    p = shipped.predict(d)
+    np.testing.assert_array_equal(p.height_m, support_height(d, p.valid))
+    raw = Segmenter(raw_model(tmp_path / "raw.onnx", height=d.shape[0], width=d.shape[1]), threads=1, min_height_m=0.01)
+    q = raw.predict(d)
+    assert raw.with_preprocessing
+    np.testing.assert_array_equal(q.height_m, support_height(d, q.valid))
