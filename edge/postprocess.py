@@ -137,8 +137,19 @@ def remove_low_parts(objects: np.ndarray, height_m: np.ndarray, min_height_m: fl
     low = objects & (height_m < np.float32(min_height_m))
     if not low.any():
         return objects
-    n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+    h, w = objects.shape
+    ltype = cv2.CV_16U if ((h + 1) // 2) * ((w + 1) // 2) < 65535 else cv2.CV_32S  # as `remove_specks`
+    n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=ltype)
+    high = objects & ~low
+    if n <= 256:
+        # the usual frame: 8-bit labels, OpenCV's masked histogram and lookup table (as `remove_specks`)
+        l8 = labels.astype(np.uint8)
+        reaches = cv2.calcHist([l8], [0], high.view(np.uint8), [256], [0, 256]).ravel()[:n] > 0
+        reaches[0] = False
+        lut = np.zeros(256, np.uint8)
+        lut[:n] = reaches
+        return objects & ~(low & cv2.LUT(l8, lut).view(bool))
     reaches = np.zeros(n, dtype=bool)
-    reaches[labels[objects & ~low]] = True  # components with a pixel over the line
+    reaches[labels[high]] = True  # components with a pixel over the line
     reaches[0] = False
     return objects & ~(low & reaches[labels])

@@ -183,3 +183,20 @@ def test_a_model_with_the_height_cue_reuses_it_and_a_raw_graph_fits_the_plane(tm
     q = raw.predict(d)
     assert raw.with_preprocessing
     np.testing.assert_array_equal(q.height_m, support_height(d, q.valid))
+
+
+def test_both_paths_agree_with_a_plain_labelling() -> None:
+    # few components (8-bit lookup path) and many (general path) against plain numpy
+    import cv2
+
+    rng = np.random.default_rng(5)
+    for t in range(200):
+        hh, ww = rng.integers(1, 150, 2)
+        m = rng.random((hh, ww)) < rng.uniform(0.0, 0.8)
+        height = rng.uniform(-0.005, 0.03, (hh, ww)).astype(np.float32)
+        n, lab = cv2.connectedComponents(m.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        low = m & (height < 0.01)
+        reaches = np.zeros(n, bool)
+        reaches[lab[m & ~low]] = True
+        reaches[0] = False
+        np.testing.assert_array_equal(remove_low_parts(m, height, 0.01), m & ~(low & reaches[lab]), err_msg=f"case {t}")
