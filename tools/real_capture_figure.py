@@ -57,8 +57,6 @@ def main(argv: list[str] | None = None) -> int:
         depth = cap.depth
         seg = Segmenter(args.model, threads=2)
         valid = valid_mask(depth)
-        logits = seg.logits(depth)
-        prob = 1.0 / (1.0 + np.exp(-np.clip(logits, -80, 80)))
         (fx, fy, cx, cy), _rms = fit_intrinsics(cap.points, cap.valid)
         info = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "height": depth.shape[0], "width": depth.shape[1]}
         k = intrinsics_for(depth.shape, info, seg.meta.sensor)
@@ -66,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         panels = [("input (standardised)", None)]
         stats = {}
         for name, t in (("stored", seg.threshold), ("0.5", 0.5), ("0.9999", 0.9999)):
-            m = (prob >= t) & valid
+            m = seg.predict(depth, threshold=t).mask == 1  # the one threshold rule, then the speck rule
             label = f"model @ {t:.4g}" + (" (stored)" if name == "stored" else "")
             stats[label] = {"object_share": float(m[valid].mean()), "iou_vs_baseline": _iou(m, base, valid)}
             panels.append((label, m))
