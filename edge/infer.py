@@ -225,7 +225,9 @@ class Segmenter:
         kind = "with-preprocessing" if self.with_preprocessing else "logits"
         return (
             f"Segmenter({str(self.path)!r}, {m.encoder} width {m.width:g}, {m.in_channels}ch, {self.precision}, "
-            f"{kind}, threshold {self.threshold:g}, threads {self.threads})"
+            f"{kind}, threshold {self.threshold:g}, "
+            + (f"height rule {self.min_height_m * 1000:g} mm, " if self.min_height_m else "")
+            + f"threads {self.threads})"
         )
 
     # -- internals -------------------------------------------------------------------------
