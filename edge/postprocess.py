@@ -51,6 +51,39 @@ def check_min_px(min_px: int) -> int:
     return int(min_px)
 
 
+class _Components:
+    """The 8-connected components of a bool mask: pixel counts per component and a per-pixel lookup.
+
+    Both rules run on every frame, so the usual frame (a few dozen components) takes 8-bit labels,
+    OpenCV's histogram and lookup table: half the time of the general numpy path, which handles
+    any count.
+    """
+
+    def __init__(self, objects: np.ndarray) -> None:
+        h, w = objects.shape
+        # at most one 8-connected component per 2 x 2 block: 16-bit labels while they fit
+        ltype = cv2.CV_16U if ((h + 1) // 2) * ((w + 1) // 2) < 65535 else cv2.CV_32S
+        self.n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=ltype)
+        self.objects = objects
+        self.few = self.n <= 256
+        self.labels = labels.astype(np.uint8) if self.few else labels
+
+    def counts(self, where: np.ndarray | None = None) -> np.ndarray:
+        """Pixels of each component (index 0, the background, is not meaningful), only those in ``where``."""
+        if self.few:
+            mask = None if where is None else where.view(np.uint8)
+            return cv2.calcHist([self.labels], [0], mask, [256], [0, 256]).ravel()[: self.n]
+        return np.bincount(self.labels[self.objects if where is None else where], minlength=self.n)
+
+    def pixels_of(self, chosen: np.ndarray) -> np.ndarray:
+        """Bool mask of the pixels whose component is ``chosen`` (one bool per label; ``chosen[0]`` False)."""
+        if self.few:
+            lut = np.zeros(256, np.uint8)
+            lut[: self.n] = chosen
+            return cv2.LUT(self.labels, lut).view(bool)
+        return chosen[self.labels]
+
+
 def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
     """``objects`` without its 8-connected components of fewer than ``min_px`` pixels.
 
@@ -65,28 +98,16 @@ def remove_specks(objects: np.ndarray, min_px: int) -> np.ndarray:
     objects = np.ascontiguousarray(objects, dtype=bool)
     if min_px <= 1 or objects.ndim != 2 or not objects.any():
         return objects
-    h, w = objects.shape
-    # at most one 8-connected component per 2 x 2 block: 16-bit labels while they fit
-    ltype = cv2.CV_16U if ((h + 1) // 2) * ((w + 1) // 2) < 65535 else cv2.CV_32S
-    n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=ltype)
-    if n <= 1:
+    comp = _Components(objects)
+    if comp.n <= 1:
         return objects
-    if n <= 256:
-        # the usual frame (a few dozen components): 8-bit labels, OpenCV's histogram and lookup
-        # table; half the time of the general path below, and this runs on every frame
-        l8 = labels.astype(np.uint8)
-        small = cv2.calcHist([l8], [0], None, [256], [0, 256]).ravel()[:n] < min_px
-        small[0] = False  # label 0 is the background
-        if not small.any():
-            return objects
-        lut = np.zeros(256, np.uint8)
-        lut[1:n] = ~small[1:n]
-        return cv2.LUT(l8, lut).view(bool)
-    small = np.bincount(labels[objects], minlength=n) < min_px
-    small[0] = False
+    small = comp.counts() < min_px
+    small[0] = False  # label 0 is the background
     if not small.any():
         return objects
-    return objects & ~small[labels]
+    keep = ~small
+    keep[0] = False
+    return comp.pixels_of(keep)
 
 
 def check_min_height(min_height_m: float) -> float:
@@ -137,19 +158,7 @@ def remove_low_parts(objects: np.ndarray, height_m: np.ndarray, min_height_m: fl
     low = objects & (height_m < np.float32(min_height_m))
     if not low.any():
         return objects
-    h, w = objects.shape
-    ltype = cv2.CV_16U if ((h + 1) // 2) * ((w + 1) // 2) < 65535 else cv2.CV_32S  # as `remove_specks`
-    n, labels = cv2.connectedComponents(objects.view(np.uint8), connectivity=8, ltype=ltype)
-    high = objects & ~low
-    if n <= 256:
-        # the usual frame: 8-bit labels, OpenCV's masked histogram and lookup table (as `remove_specks`)
-        l8 = labels.astype(np.uint8)
-        reaches = cv2.calcHist([l8], [0], high.view(np.uint8), [256], [0, 256]).ravel()[:n] > 0
-        reaches[0] = False
-        lut = np.zeros(256, np.uint8)
-        lut[:n] = reaches
-        return objects & ~(low & cv2.LUT(l8, lut).view(bool))
-    reaches = np.zeros(n, dtype=bool)
-    reaches[labels[high]] = True  # components with a pixel over the line
+    comp = _Components(objects)
+    reaches = comp.counts(objects & ~low) > 0  # components with a pixel over the line
     reaches[0] = False
-    return objects & ~(low & reaches[labels])
+    return objects & ~(low & comp.pixels_of(reaches))
