@@ -7,6 +7,7 @@ import argparse
 from edge.cliutil import add_min_height_arg, add_recording_args, add_version, print_json, progress, run
 from edge.evaluate import DEFAULT_BOUNDARY_PX, FIGURE_PICKS, EvalReport, model_label
 from edge.metrics import ErrorBreakdown, MetricSummary
+from edge.postprocess import describe_height_rule
 
 PROG = "depthseg-eval"
 
@@ -152,8 +153,7 @@ def format_table(report: EvalReport, model_name: str) -> str:
         lines += _score_rows([f"{n} [void band]" for n in names], ignored)
     notes = [
         f"{report.frames} frames, threshold {report.threshold:g}, "
-        + (f"model's object pixels under {report.min_height_m * 1000:g} mm above the support made table "
-           "(in objects reaching higher), " if report.min_height_m else "")
+        + (f"model's {describe_height_rule(report.min_height_m)}, " if report.min_height_m else "")
         + f"model's object specks under {report.min_object_px} px removed; each score is the mean over frames in % "
         "(pooled IoU: over all valid pixels of all frames).",
     ]

@@ -31,7 +31,7 @@ from edge.errors import ConfigError, DataError, ModelError
 from edge.io.paths import check_input_file
 from edge.meta import ModelMeta
 from edge.metrics import UNKNOWN, logit, segmentation_mask, sigmoid
-from edge.postprocess import check_min_height, check_min_px, support_height
+from edge.postprocess import check_min_height, check_min_px, describe_height_rule, support_height
 from edge.preprocess import preprocess_batch_for, preprocess_for, valid_for
 
 __all__ = [
@@ -226,7 +226,7 @@ class Segmenter:
         return (
             f"Segmenter({str(self.path)!r}, {m.encoder} width {m.width:g}, {m.in_channels}ch, {self.precision}, "
             f"{kind}, threshold {self.threshold:g}, "
-            + (f"height rule {self.min_height_m * 1000:g} mm, " if self.min_height_m else "")
+            + (f"{describe_height_rule(self.min_height_m)}, " if self.min_height_m else "")
             + f"threads {self.threads})"
         )
 

@@ -36,7 +36,7 @@ import numpy as np
 from edge.cues import HEIGHT_SCALE, MAX_MIN_HEIGHT_M, height_cue
 from edge.errors import ConfigError
 
-__all__ = ["check_min_height", "check_min_px", "remove_low_parts", "remove_specks", "support_height",
+__all__ = ["check_min_height", "describe_height_rule", "check_min_px", "remove_low_parts", "remove_specks", "support_height",
            "MAX_MIN_HEIGHT_M"]
 
 
@@ -123,6 +123,13 @@ def check_min_height(min_height_m: float) -> float:
     if not (math.isfinite(m) and 0.0 <= m <= MAX_MIN_HEIGHT_M):
         raise ConfigError(f"`min_height_m` must be from 0 (off) to {MAX_MIN_HEIGHT_M:g} m, got {min_height_m}")
     return m
+
+
+def describe_height_rule(min_height_m: float) -> str:
+    """The height rule in words for reports and summaries ("" when it is off), one wording everywhere."""
+    if not min_height_m:
+        return ""
+    return f"object pixels under {min_height_m * 1000:g} mm above the table made table (in objects reaching higher)"
 
 
 def support_height(depth: np.ndarray, valid: np.ndarray) -> np.ndarray:

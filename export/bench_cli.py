@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.cliutil import add_min_height_arg, add_version, print_json, progress, run
+from edge.postprocess import describe_height_rule
 
 PROG = "depthseg-bench"
 
@@ -112,8 +113,7 @@ def format_report(res: dict[str, Any]) -> str:
         f"frames: {res['frames']}; {res['runs']} timed runs per model after {res['warmup']} warm-up, round-robin"
         + (f" in blocks of {res['block']} runs" if res.get("block", 1) > 1 else " (models alternate every frame)")
         + (f", paced at {res['rate_hz']:g} frames/s" if res.get("rate_hz") else ", back to back")
-        + (f"; every model's object pixels under {res['min_height_m'] * 1000:g} mm above the support made table"
-           if res.get("min_height_m") else ""),
+        + (f"; every model's {describe_height_rule(res['min_height_m'])}" if res.get("min_height_m") else ""),
         "times in ms; 'inf' = session.run only; 'frame' = raw depth -> mask (pre + inf + post); fps = 1000 / mean frame ms; "
         "'x first' = frame p50 / the first model's",
     ]

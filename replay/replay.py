@@ -38,6 +38,7 @@ from edge.metrics import (
     logit,
     segmentation_mask,
 )
+from edge.postprocess import describe_height_rule
 
 __all__ = ["replay", "ReplaySummary", "FrameResult", "LatencyHistogram", "ReplayDataError", "UNKNOWN", "check_rate",
            "MAX_GAP_S"]
@@ -217,7 +218,7 @@ class ReplaySummary:
             f"  max {lat.max_ms:.2f}" if lat.n else "latency ms: n/a",
             f"unknown (invalid depth) pixels: {100 * self.unknown_fraction:.1f} %; "
             f"object share of valid pixels: {100 * self.object_fraction:.1f} %  (threshold {self.threshold:g}"
-            + (f", under {self.min_height_m * 1000:g} mm above the table made table" if self.min_height_m else "") + ")",
+            + (f", {describe_height_rule(self.min_height_m)}" if self.min_height_m else "") + ")",
         ]
         if self.rate is not None:
             skipped = f"; {self.gaps_skipped} gaps over {MAX_GAP_S:g} s skipped" if self.gaps_skipped else ""
