@@ -13,9 +13,17 @@ focal length. So the plane is fitted in (u, v, 1/Z) on a sparse pixel grid:
 1. RANSAC with a fixed table of ``N_HYPOTHESES`` point triplets (fractions of the valid-point
    count, drawn once from a fixed seed): deterministic, and the same table is a constant in the
    ``--with-preprocessing`` ONNX graph.
-2. Score = inliers (|Z - Z_plane| < ``INLIER_M``) - ``BEYOND_WEIGHT`` x points more than
-   ``BEYOND_M`` *behind* the plane: a support surface has nothing under it in view, so a box top
-   (with the floor visible behind it) loses to the floor even when it covers more pixels.
+2. Score = inliers (|Z - Z_plane| < ``INLIER_M``) - ``BEYOND_WEIGHT`` x the points that
+   cannot lie on or above that support:
+   - points ``BEYOND_M`` to ``REACH_M`` *behind* the plane: a support surface has nothing just
+     under it in view, so a box top (with the table visible behind it) loses to the table even
+     when it covers more pixels;
+   - points more than ``REACH_M`` *in front of* it: nothing stands 30 cm tall on a support a
+     wrist camera sees from 20-40 cm, so a floor past a table edge, with the table and
+     everything on it far in front of it, loses to the table even when more floor than free
+     table is in view (before this term it won: docs/worst, frame 703 of the validation set).
+   Points more than ``REACH_M`` behind the plane do not count against it: that is the floor past
+   the edge of a table.
 3. Two least-squares refinements on the inliers, in inverse depth.
 
 The cue is ``HEIGHT_SCALE`` x (Z_plane - Z) (centimetres above the plane along the optical axis),
@@ -51,6 +59,7 @@ MIN_POINTS = 12
 INLIER_M = 0.008  # the baseline's 8 mm: noise of the sensor (SENSOR.md) and BlenSor's 4 mm sigma
 BEYOND_M = 0.03
 BEYOND_WEIGHT = 0.5
+REACH_M = 0.3  # objects stand at most this high on a support seen from 20-40 cm (HEIGHT_CLIP's top)
 REFINE_ITERS = 2
 HEIGHT_SCALE = 100.0  # metres -> centimetres
 HEIGHT_CLIP = (-10.0, 30.0)
@@ -160,7 +169,8 @@ def fit_dominant_plane(depth: np.ndarray, valid: np.ndarray, stride: int = GRID_
     np.maximum(r, np.float32(1e-6), out=r)
     np.divide(np.float32(1.0), r, out=r)
     np.subtract(z32, r, out=r)
-    score = _count_rows(np.less(np.abs(r, out=tmp), INLIER_M)) - BEYOND_WEIGHT * _count_rows(r > BEYOND_M)
+    score = (_count_rows(np.less(np.abs(r, out=tmp), INLIER_M))
+             - BEYOND_WEIGHT * (_count_rows((r > BEYOND_M) & (r <= REACH_M)) + _count_rows(r < -REACH_M)))
     score = np.where(ok, score, -np.inf)
     best = int(np.argmax(score))
     if not np.isfinite(score[best]):

@@ -51,6 +51,7 @@ from edge.cues import (
     HEIGHT_SCALE,
     INLIER_M,
     MIN_POINTS,
+    REACH_M,
     REFINE_ITERS,
     STATS_STRIDE,
     TRIM,
@@ -332,8 +333,12 @@ class PreprocGraph(nn.Module):
         ok = ok & ((g3 & (inv <= eps32)).to(_F32).sum(dim=2) == 0)
         r = zg32[:, None, :] - 1.0 / torch.maximum(inv, eps32)
         inl = g3 & (torch.abs(r) < torch.tensor(INLIER_M, dtype=_F32))
-        beyond = g3 & (r > torch.tensor(BEYOND_M, dtype=_F32))
-        score = inl.to(_F32).sum(dim=2).to(_F64) - BEYOND_WEIGHT * beyond.to(_F32).sum(dim=2).to(_F64)
+        reach = torch.tensor(REACH_M, dtype=_F32)
+        beyond = g3 & (r > torch.tensor(BEYOND_M, dtype=_F32)) & (r <= reach)
+        front = g3 & (r < -reach)
+        # numpy adds the two integer counts before weighting them: so does the graph (exact in float32)
+        against = (beyond.to(_F32).sum(dim=2) + front.to(_F32).sum(dim=2)).to(_F64)
+        score = inl.to(_F32).sum(dim=2).to(_F64) - BEYOND_WEIGHT * against
         score = torch.where(ok, score, torch.tensor(float("-inf"), dtype=_F64))
         best = torch.argmax(score, dim=1, keepdim=True)  # first max wins, like numpy
         found = ok.any(dim=1) & (n >= MIN_POINTS)

@@ -5,8 +5,8 @@ Why: when the model calls a whole table object, the first question is whether th
 fit (`edge.cues.fit_dominant_plane`) took the floor past a table edge for the support. With a
 frame index it explains that frame; without one it scans every frame and counts those where the
 fit took a plane *below* the support, i.e. where more than ``--share`` of the labelled
-background reads more than ``--above-cm`` above the plane (the failure of
-docs/worst/worst_000703.png), so one knows how often it happens before changing the rule.
+background reads more than ``--above-cm`` above the plane (the failure of validation frame 703
+before `edge.cues.REACH_M`), so one knows how often it happens before changing the rule.
 
     .venv/bin/python tools/height_cue_frame.py data/val4 703      # one frame
     .venv/bin/python tools/height_cue_frame.py data/test_table_edge  # how often, over a set

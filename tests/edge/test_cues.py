@@ -67,6 +67,23 @@ def test_box_top_bigger_than_the_visible_floor_does_not_become_the_plane() -> No
     assert np.abs(np.median(h[:15, :])) < 0.1
 
 
+def test_table_edge_with_more_floor_than_free_table_keeps_the_table_as_the_plane() -> None:
+    """Nothing stands 30 cm above a support seen from 20-40 cm: a far floor past a table edge,
+    which everything else in view stands in front of, loses to the table (docs/worst, frame 703)."""
+    z = _tilted_floor(dist=0.35)
+    rows, cols = np.mgrid[0:H, 0:W]
+    floor = rows < 0.8 * cols  # 52 % of the frame: the floor past the edge, 45 cm lower
+    z[floor] += 0.45
+    z[110:165, 10:130] -= 0.06  # objects on the table, 17 %: 30 % free table, less than the floor
+    free = ~floor
+    free[110:165, 10:130] = False
+    assert floor.sum() > free.sum()
+    h = height_cue(z, valid_mask(z))
+    assert np.abs(np.median(h[free])) < 0.1
+    assert np.median(h[110:165, 10:130]) == pytest.approx(6.0, abs=0.6)
+    assert np.all(h[floor] == HEIGHT_CLIP[0])  # the floor reads as far below as the cue goes
+
+
 def test_height_cue_is_deterministic_and_clipped() -> None:
     z, _ = _scene(np.random.default_rng(1))
     z[50, 50] = 4.0  # far below the table: clipped, not propagated

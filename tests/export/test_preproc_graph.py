@@ -129,6 +129,10 @@ def _hard_frames() -> list[np.ndarray]:
     f = base.copy()
     f[rng.random(f.shape) < 0.95] = 0.0  # 5 % valid
     out.append(f)
+    f = base.copy()
+    rows, cols = np.mgrid[0 : f.shape[0], 0 : f.shape[1]]
+    f[rows < 0.8 * cols - 20] += 0.45  # a table edge, the floor 45 cm below: planes in front count against
+    out.append(f)
     return out
 
 
