@@ -11,7 +11,8 @@ Why each step (paper III.D and Fig. 6):
   between their 1st and 99th percentile and the result is clipped to +-``ROBUST_CLIP``, so a few
   far or saturated pixels cannot swing the whole frame (`edge.cues.robust_mean_std`).
 - ``cues``: extra channels after the depth channels; ``"height"`` is centimetres above the
-  dominant plane (`edge.cues.height_cue`).
+  dominant plane (`edge.cues.height_cue`); ``"steepness"`` is 1 - the cosine of the surface's
+  angle to the optical axis (`edge.cues.steepness_cue`, needs the camera's intrinsics).
 - VGG pools five times, so H and W are zero-padded to multiples of 32 (171 x 224 -> 192 x 224);
   padding goes bottom/right so cropping the output back is a slice.
 
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from edge.cues import CUES, height_cue, robust_mean_std
+from edge.cues import CUES, height_cue, robust_mean_std, steepness_cue
 from edge.errors import DataError
 
 __all__ = [
@@ -146,6 +147,7 @@ def preprocess(
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
     max_range_m: float = math.inf,
+    sensor=None,
 ) -> Preprocessed:
     """Raw depth (metres, any invalid marker) -> padded network input [C, Hp, Wp] float32.
 
@@ -156,6 +158,7 @@ def preprocess(
         standardize_mode: see `standardize`.
         cues: extra channels after the depth copies, from `edge.cues.CUES`.
         max_range_m: pixels farther than this are invalid (see `valid_mask`).
+        sensor: the camera (`edge.meta.SensorSpec`), needed by the ``steepness`` cue only.
 
     Returns:
         `Preprocessed` with ``x`` of ``channels + len(cues)`` channels.
@@ -174,6 +177,10 @@ def preprocess(
     for i, cue in enumerate(cues):
         if cue == "height":
             x[channels + i, :h, :w] = height_cue(depth, valid)
+        elif cue == "steepness":
+            if sensor is None:
+                raise DataError("the 'steepness' cue needs the camera's intrinsics; pass sensor= (the model's ModelMeta.sensor)")
+            x[channels + i, :h, :w] = steepness_cue(depth, valid, sensor.intrinsics_for_size(h, w))
     return Preprocessed(x=x, valid=valid, mean=mean, std=std)
 
 
@@ -184,7 +191,7 @@ def input_options(meta) -> dict:
         meta: the model's metadata (`edge.meta.ModelMeta`).
     """
     return {"channels": meta.in_channels, "multiple": meta.pad_multiple, "standardize_mode": meta.standardize,
-            "cues": tuple(meta.cues), "max_range_m": meta.sensor.max_range_m}
+            "cues": tuple(meta.cues), "max_range_m": meta.sensor.max_range_m, "sensor": meta.sensor}
 
 
 def preprocess_for(depth: np.ndarray, meta) -> Preprocessed:
@@ -205,10 +212,11 @@ def preprocess_batch(
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
     max_range_m: float = math.inf,
+    sensor=None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stack frames of one size: (x [N, C, Hp, Wp], valid [N, H, W])."""
-    items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues, max_range_m=max_range_m)
-             for f in frames]
+    items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues, max_range_m=max_range_m,
+                        sensor=sensor) for f in frames]
     shapes = {it.shape for it in items}
     if len(shapes) != 1:
         raise DataError(f"frames in a batch must share one size, got {sorted(shapes)}")

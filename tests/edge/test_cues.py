@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from edge.cues import HEIGHT_CLIP, fit_dominant_plane, height_cue, robust_mean_std
+from edge.cues import HEIGHT_CLIP, fit_dominant_plane, height_cue, robust_mean_std, steepness_cue
 from edge.meta import ModelMeta
 from edge.preprocess import ROBUST_CLIP, preprocess, preprocess_for, standardize, valid_mask
 
@@ -163,3 +163,34 @@ def test_height_cue_equals_the_plain_expression() -> None:
     plain = np.clip((zp - d) * np.float32(100.0), *HEIGHT_CLIP).astype(np.float32)
     np.testing.assert_array_equal(fit.depth((H, W)), zp)
     np.testing.assert_array_equal(height_cue(z, valid), plain)
+
+
+def test_steepness_of_a_tilted_plane_is_one_minus_the_cosine_of_its_tilt() -> None:
+    z = _tilted_floor()
+    c = steepness_cue(z, valid_mask(z), (FX, FY, CX, CY))
+    n = np.array([np.sin(0.12), np.sin(-0.08), 1.0])
+    expected = 1.0 - n[2] / np.linalg.norm(n)
+    np.testing.assert_allclose(c[2:-2, 2:-2], expected, atol=2e-6)
+    assert not c[:2].any() and not c[-2:].any() and not c[:, :2].any() and not c[:, -2:].any()  # border
+
+
+def test_steepness_is_high_at_object_sides_and_zero_near_invalid_pixels() -> None:
+    z = np.full((H, W), 0.3, np.float32)
+    z[60:120, 80:160] = 0.24  # a 6 cm box: its top faces the camera, its outline is a depth jump
+    z[10, 10] = 0.0  # a dead pixel
+    c = steepness_cue(z, valid_mask(z), (FX, FY, CX, CY))
+    assert c.dtype == np.float32 and c.shape == (H, W)
+    assert c[90, 120] == 0 and c[30, 40] == 0  # the top and the table face the camera
+    assert c[60, 120] > 0.7 and c[90, 80] > 0.7  # the box's outline: a 6 cm jump within 4 px
+    assert np.all(c[8:13, 8:13] == 0)  # every value whose differences read the dead pixel
+    assert c.min() >= 0 and c.max() <= 1
+
+
+def test_steepness_needs_the_sensor_and_rides_in_input_options() -> None:
+    z, _ = _scene(np.random.default_rng(6))
+    meta = ModelMeta(in_channels=1, standardize="robust", cues=("height", "steepness"))
+    p = preprocess_for(z, meta)
+    assert p.x.shape == (3, 192, 224)
+    np.testing.assert_array_equal(p.x[2, :H, :W], steepness_cue(z, valid_mask(z), meta.sensor.intrinsics_for_size(H, W)))
+    with pytest.raises(Exception, match="needs the camera's intrinsics"):
+        preprocess(z, 1, cues=("steepness",))

@@ -239,6 +239,9 @@ def test_unsupported_preprocessing_is_one_line_model_error(monkeypatch, tmp_path
         export_with_preprocessing(model, meta.with_(cues=("height",)), tmp_path / "x.onnx")
     assert "\n" not in str(err.value)
     monkeypatch.undo()
+    with pytest.raises(ModelError, match=r"cue\(s\) \['steepness'\]") as err:  # numpy-only cue (README "Ablation")
+        pg.check_supported(meta.with_(cues=("steepness",)))
+    assert "\n" not in str(err.value)
     with pytest.raises(ModelError, match="first conv takes 3 channels but its metadata says 2") as err:
         pg.check_supported(meta.with_(in_channels=1, cues=("height",)), model)
     assert not (tmp_path / "x.onnx").exists()

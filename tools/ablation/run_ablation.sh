@@ -14,11 +14,11 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 BIN=.venv/bin
 COMMON="--limit 3000 --encoder vgg11 --batch-norm --in-channels 3 --standardize robust --extra-skip --epochs 6 \
- --batch-size 16 --lr 1e-3 --lr-schedule cosine --patience 6 --seed 0 --threads 2"
-row() {  # name data width cues
-  local name=$1 data=$2 width=$3 cues=$4
+ --batch-size 16 --lr 1e-3 --lr-schedule cosine --patience 6 --threads 2"
+row() {  # name data width cues [seed]
+  local name=$1 data=$2 width=$3 cues=$4 seed=${5:-0}
   local extra=""; [ "$cues" != none ] && extra="--cues $cues"
-  [ -f "runs/ablation/$name/best.pt" ] || $BIN/depthseg-train --data "$data" --out "runs/ablation/$name" --width "$width" $extra $COMMON
+  [ -f "runs/ablation/$name/best.pt" ] || $BIN/depthseg-train --data "$data" --out "runs/ablation/$name" --width "$width" $extra $COMMON --seed "$seed"
   $BIN/depthseg-export --model "runs/ablation/$name/best.pt" --single-channel --out "runs/ablation/$name/model.onnx" --data "$data"
 }
 ROWS=${*:-"zh_w125 z_w125 zh_w125_blur zh_w25"}
@@ -29,6 +29,13 @@ for r in $ROWS; do
     zh_w125_blur) row zh_w125_blur data/train_blur 0.125 height ;;
     zh_w25) row zh_w25 data/train4 0.25 height ;;
     zh_w125_v8) row zh_w125_v8 data/train_v8 0.125 height ;;  # issue 13: 8 camera views per settled scene
+    # the steepness cue (1 - cos of the normal's angle to the optical axis, edge.cues.steepness_cue)
+    # against height alone, on the shipped recipe's data (data/train_v19, tools/train_default.sh), two seeds each
+    zh_v19) row zh_v19 data/train_v19 0.125 height ;;
+    zh_v19_s1) row zh_v19_s1 data/train_v19 0.125 height 1 ;;
+    zhs_v19) row zhs_v19 data/train_v19 0.125 height,steepness ;;
+    zhs_v19_s1) row zhs_v19_s1 data/train_v19 0.125 height,steepness 1 ;;
+    zs_v19) row zs_v19 data/train_v19 0.125 steepness ;;
     *) echo "unknown row $r" >&2; exit 2 ;;
   esac
 done
