@@ -36,6 +36,7 @@ for r in $ROWS; do
     zhs_v19) row zhs_v19 data/train_v19 0.125 height,steepness ;;
     zhs_v19_s1) row zhs_v19_s1 data/train_v19 0.125 height,steepness 1 ;;
     zs_v19) row zs_v19 data/train_v19 0.125 steepness ;;
+    z_v19) row z_v19 data/train_v19 0.125 none ;;
     *) echo "unknown row $r" >&2; exit 2 ;;
   esac
 done
