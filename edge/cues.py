@@ -282,7 +282,8 @@ def steepness_cue(depth: np.ndarray, valid: np.ndarray, intrinsics: tuple[float,
     uu = np.arange(k, w - k, dtype=np.float32) - cx
     vv = np.arange(k, h - k, dtype=np.float32)[:, None] - cy
     nz = uu * zu + vv * zv + zc
-    norm = np.sqrt((fx * zu) ** 2 + (fy * zv) ** 2 + nz**2)
+    gu, gv = fx * zu, fy * zv
+    norm = np.sqrt(gu * gu + gv * gv + nz * nz)  # products, not **2: the ONNX graph repeats them bit for bit
     with np.errstate(invalid="ignore", divide="ignore"):
         cos = np.where(ok & (norm > 0), nz / norm, 1.0)
     out[k : h - k, k : w - k] = np.where(ok, 1.0 - np.clip(cos, 0.0, 1.0), 0.0)

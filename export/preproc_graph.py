@@ -20,6 +20,9 @@ agree), with a fixed frame size and no data-dependent shapes:
   Cramer's rule; a failed step freezes the plane like numpy's ``break``). The fallbacks (too few
   grid points: median of all valid pixels; no usable hypothesis: median of the grid points) need
   a full sort, so they sit in an ONNX ``If`` that only runs when a frame of the batch needs it;
+- ``cues=("steepness",)``: `edge.cues.steepness_cue` by slices of the frame, its float32
+  operations in numpy's order; only the square root runs in float64 (torch's float32 square root
+  is not correctly rounded, numpy's is; rounded back, the two agree bit for bit);
 - zero-pad bottom/right to multiples of ``pad_multiple``; the network; crop; sigmoid.
 
 Exactness: float32 steps are the same IEEE float32 operations numpy does, the hypothesis planes
@@ -53,6 +56,7 @@ from edge.cues import (
     MIN_POINTS,
     REACH_M,
     REFINE_ITERS,
+    STEEP_STEP,
     STATS_STRIDE,
     TRIM,
     hypothesis_table,
@@ -83,7 +87,7 @@ __all__ = [
 PROB_ATOL = 1e-4  # probability; float32 network arithmetic in two runtimes
 HEIGHT_ATOL_CM = 1e-3  # height cue, when graph and numpy pick the same plane hypothesis
 SUPPORTED_STANDARDIZE = ("valid-pixels", "robust")  # what PreprocGraph can express
-SUPPORTED_CUES = ("height",)
+SUPPORTED_CUES = ("height", "steepness")
 NET_INPUT = "net_input"  # output name of `export_preprocessing`
 
 _F32 = torch.float32
@@ -234,6 +238,7 @@ class PreprocGraph(nn.Module):
         self.robust = meta.standardize == "robust"
         self.cues = tuple(meta.cues)
         self.h, self.w = meta.sensor.height, meta.sensor.width
+        self.intrinsics = meta.sensor.intrinsics_for_size(self.h, self.w)
         self.max_range = float(np.float32(meta.sensor.max_range_m))  # edge.preprocess.valid_for: no return beyond the range
         self.hp, self.wp = padded_shape(self.h, self.w, meta.pad_multiple)
         u, v = _grid_slots(self.h, self.w, GRID_STRIDE)
@@ -369,6 +374,36 @@ class PreprocGraph(nn.Module):
         d = torch.where(valid, depth, zp)
         return torch.clamp((zp - d) * torch.tensor(HEIGHT_SCALE, dtype=_F32), *HEIGHT_CLIP)
 
+    # -- steepness cue -------------------------------------------------------------------------
+    def _steepness(self, depth: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        """`edge.cues.steepness_cue` for a batch, the same float32 operations in the same order."""
+        h, w, k = self.h, self.w, STEEP_STEP
+        fx, fy, cx, cy = (torch.tensor(float(np.float32(v)), dtype=_F32) for v in self.intrinsics)
+        z = torch.where(valid, depth, torch.zeros_like(depth))
+        scale = torch.tensor(float(np.float32(1.0 / (3 * 2 * k))), dtype=_F32)
+        du = z[:, :, 2 * k :] - z[:, :, : -2 * k]
+        zu = ((du[:, :-2] - (-du[:, 1:-1])) - (-du[:, 2:])) * scale  # a + b written a - (-b): see the module docstring
+        dv = z[:, 2 * k :] - z[:, : -2 * k]
+        zv = ((dv[:, :, :-2] - (-dv[:, :, 1:-1])) - (-dv[:, :, 2:])) * scale
+        okh = valid[:, :, 2 * k :] & valid[:, :, : -2 * k]
+        okv = valid[:, 2 * k :] & valid[:, : -2 * k]
+        zu = zu[:, k - 1 : h - k - 1]
+        zv = zv[:, :, k - 1 : w - k - 1]
+        ok = (okh[:, :-2] & okh[:, 1:-1] & okh[:, 2:])[:, k - 1 : h - k - 1]
+        ok = ok & (okv[:, :, :-2] & okv[:, :, 1:-1] & okv[:, :, 2:])[:, :, k - 1 : w - k - 1]
+        zc = z[:, k : h - k, k : w - k]
+        ok = ok & valid[:, k : h - k, k : w - k]
+        uu = self.cols[:, :, k : w - k] - cx
+        vv = self.rows[:, k : h - k] - cy
+        nz = ((uu * zu) - (-(vv * zv))) - (-zc)
+        gu, gv = fx * zu, fy * zv
+        # float32 sqrt in torch is not correctly rounded (numpy's is); through float64 it is, in both runtimes
+        norm = torch.sqrt((((gu * gu) - (-(gv * gv))) - (-(nz * nz))).to(_F64)).to(_F32)
+        one = torch.ones((), dtype=_F32)
+        cos = torch.where(ok & (norm > 0), nz / torch.where(norm > 0, norm, one), one)
+        inner = torch.where(ok, one - torch.clamp(cos, 0.0, 1.0), torch.zeros((), dtype=_F32))
+        return F.pad(inner, (k, k, k, k))
+
     def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         valid = torch.isfinite(depth) & (depth > 0) & (depth <= self.max_range)
         d = torch.where(valid, depth, torch.zeros_like(depth)).to(_F64)
@@ -383,6 +418,8 @@ class PreprocGraph(nn.Module):
         for cue in self.cues:
             if cue == "height":
                 planes.append(self._height(depth, valid))
+            elif cue == "steepness":
+                planes.append(self._steepness(depth, valid))
         x = torch.stack(planes, dim=1) if len(planes) > 1 else z.unsqueeze(1)
         return F.pad(x, (0, self.wp - self.w, 0, self.hp - self.h)), valid
 

@@ -144,7 +144,7 @@ def cue_frames():
 
 
 @pytest.mark.parametrize("standardize", ["valid-pixels", "robust"])
-@pytest.mark.parametrize("cues", [(), ("height",)])
+@pytest.mark.parametrize("cues", [(), ("height",), ("height", "steepness")])
 @pytest.mark.parametrize("channels", [1, 3])
 def test_preprocessing_module_equals_edge_preprocess(standardize, cues, channels, cue_frames):
     """The torch module itself (no export): bit-identical to numpy on every branch, in a batch."""
@@ -193,6 +193,26 @@ def test_robust_height_graph_matches_numpy_in_onnxruntime(tmp_path, cue_frames):
     np.testing.assert_array_equal(one[0], x[0])
 
 
+def test_steepness_graph_matches_numpy_in_onnxruntime(tmp_path, cue_frames):
+    """The steepness cue exported: the same float32 operations as `edge.cues.steepness_cue` in onnxruntime."""
+    import onnxruntime as ort
+
+    from edge.preprocess import preprocess_for
+    from export.preproc_graph import export_preprocessing
+
+    meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1, standardize="robust",
+                     cues=("steepness",))
+    path = export_preprocessing(meta, tmp_path / "pre.onnx")
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    x, _ = sess.run(None, {"depth": np.stack(cue_frames)})
+    steep = 0
+    for i, f in enumerate(cue_frames):
+        ref = preprocess_for(f, meta)
+        np.testing.assert_array_equal(x[i, 1], ref.x[1], err_msg=f"steepness, frame {i}")
+        steep += int((ref.x[1] > 0.5).sum())
+    assert steep > 100  # the frames have steep surfaces, not only zeros
+
+
 @pytest.fixture(scope="module")
 def robust_height(tmp_path_factory):
     from tinymodel import one_torch_thread
@@ -239,9 +259,6 @@ def test_unsupported_preprocessing_is_one_line_model_error(monkeypatch, tmp_path
         export_with_preprocessing(model, meta.with_(cues=("height",)), tmp_path / "x.onnx")
     assert "\n" not in str(err.value)
     monkeypatch.undo()
-    with pytest.raises(ModelError, match=r"cue\(s\) \['steepness'\]") as err:  # numpy-only cue (README "Ablation")
-        pg.check_supported(meta.with_(cues=("steepness",)))
-    assert "\n" not in str(err.value)
     with pytest.raises(ModelError, match="first conv takes 3 channels but its metadata says 2") as err:
         pg.check_supported(meta.with_(in_channels=1, cues=("height",)), model)
     assert not (tmp_path / "x.onnx").exists()
