@@ -56,8 +56,8 @@ from edge.cues import (
     MIN_POINTS,
     REACH_M,
     REFINE_ITERS,
-    STEEP_STEP,
     STATS_STRIDE,
+    STEEP_STEP,
     TRIM,
     hypothesis_table,
 )
