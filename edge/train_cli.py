@@ -58,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="depth standardisation: mean/std of all valid pixels (paper) or trimmed 1-99 %% and "
                         "clipped (robust to a few far or saturated pixels)")
     m.add_argument("--cues", default="", help="extra input channels, comma-separated: 'height' = cm above the "
-                   "dominant plane (edge.cues); default none")
+                   "dominant plane, 'steepness' = 1 - cos of the surface's angle to the optical axis "
+                   "(edge.cues); default none")
     m.add_argument("--extra-skip", action="store_true", help="also fuse pool2 and pool1 (paper V.d)")
     m.add_argument("--full-skip", action="store_true",
                    help="also fuse the full-resolution conv1 map before the classifier (sharper object boundaries)")
