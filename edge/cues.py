@@ -265,26 +265,45 @@ def steepness_cue(depth: np.ndarray, valid: np.ndarray, intrinsics: tuple[float,
     k = STEEP_STEP
     if h < 2 * k + 1 or w < 2 * k + 1:
         return out
-    z = np.where(valid, depth, 0).astype(np.float32)
+    # Invalid pixels (0, NaN, inf, beyond the range) are read as they are: every value they touch
+    # is masked by ``ok``, so the result is the same as reading them as 0, one pass cheaper. The
+    # arithmetic runs in place on the interior (rows and columns k .. size - k - 1), in this
+    # order: export.preproc_graph repeats it operation for operation (bit-identical, tested).
+    z = np.asarray(depth, dtype=np.float32)
     scale = np.float32(1.0 / (3 * 2 * k))
-    du = z[:, 2 * k:] - z[:, : -2 * k]  # [H, W - 2k], centred on u = k .. W - k - 1
-    zu = (du[:-2] + du[1:-1] + du[2:]) * scale  # rows 1 .. H - 2
-    dv = z[2 * k:] - z[: -2 * k]  # [H - 2k, W], centred on v = k .. H - k - 1
-    zv = (dv[:, :-2] + dv[:, 1:-1] + dv[:, 2:]) * scale  # columns 1 .. W - 2
-    okh = valid[:, 2 * k:] & valid[:, : -2 * k]
-    okv = valid[2 * k:] & valid[: -2 * k]
-    # the common interior: rows k .. H - k - 1, columns k .. W - k - 1
-    zu = zu[k - 1 : h - k - 1]
-    zv = zv[:, k - 1 : w - k - 1]
-    ok = (okh[:-2] & okh[1:-1] & okh[2:])[k - 1 : h - k - 1] & (okv[:, :-2] & okv[:, 1:-1] & okv[:, 2:])[:, k - 1 : w - k - 1]
-    zc = z[k : h - k, k : w - k]
-    ok &= valid[k : h - k, k : w - k]
-    uu = np.arange(k, w - k, dtype=np.float32) - cx
-    vv = np.arange(k, h - k, dtype=np.float32)[:, None] - cy
-    nz = uu * zu + vv * zv + zc
-    gu, gv = fx * zu, fy * zv
-    norm = np.sqrt(gu * gu + gv * gv + nz * nz)  # products, not **2: the ONNX graph repeats them bit for bit
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.where(ok & (norm > 0), nz / norm, 1.0)
-    out[k : h - k, k : w - k] = np.where(ok, 1.0 - np.clip(cos, 0.0, 1.0), 0.0)
+    rows, cols = slice(k - 1, h - k + 1), slice(k - 1, w - k + 1)
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        du = np.subtract(z[rows, 2 * k :], z[rows, : -2 * k])  # differences over 2k px, 3 lines
+        zu = du[:-2] + du[1:-1]
+        zu += du[2:]
+        zu *= scale
+        dv = np.subtract(z[2 * k :, cols], z[: -2 * k, cols])
+        zv = dv[:, :-2] + dv[:, 1:-1]
+        zv += dv[:, 2:]
+        zv *= scale
+        okh = valid[rows, 2 * k :] & valid[rows, : -2 * k]
+        okv = valid[2 * k :, cols] & valid[: -2 * k, cols]
+        ok = okh[:-2] & okh[1:-1]
+        ok &= okh[2:]
+        ok &= okv[:, :-2]
+        ok &= okv[:, 1:-1]
+        ok &= okv[:, 2:]
+        ok &= valid[k : h - k, k : w - k]
+        nz = (np.arange(k, w - k, dtype=np.float32) - cx) * zu  # (u - cx) Zu + (v - cy) Zv + Z
+        t = (np.arange(k, h - k, dtype=np.float32)[:, None] - cy) * zv
+        nz += t
+        nz += z[k : h - k, k : w - k]
+        zu *= fx
+        zv *= fy
+        zu *= zu
+        zv *= zv
+        zu += zv
+        np.multiply(nz, nz, out=t)
+        zu += t
+        np.sqrt(zu, out=zu)  # |n|
+        ok &= zu > 0
+        np.divide(nz, zu, out=nz)  # cos
+        np.clip(nz, 0.0, 1.0, out=nz)
+        np.subtract(np.float32(1.0), nz, out=nz)
+        np.copyto(out[k : h - k, k : w - k], nz, where=ok)
     return out
