@@ -23,11 +23,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from edge.cues import CUES, height_cue, robust_mean_std, steepness_cue
 from edge.errors import DataError
+
+if TYPE_CHECKING:
+    from edge.meta import SensorSpec
 
 __all__ = [
     "Preprocessed",
@@ -147,7 +151,7 @@ def preprocess(
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
     max_range_m: float = math.inf,
-    sensor=None,
+    sensor: SensorSpec | None = None,
 ) -> Preprocessed:
     """Raw depth (metres, any invalid marker) -> padded network input [C, Hp, Wp] float32.
 
@@ -212,7 +216,7 @@ def preprocess_batch(
     standardize_mode: str = "valid-pixels",
     cues: tuple[str, ...] = (),
     max_range_m: float = math.inf,
-    sensor=None,
+    sensor: SensorSpec | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stack frames of one size: (x [N, C, Hp, Wp], valid [N, H, W])."""
     items = [preprocess(f, channels, multiple, standardize_mode=standardize_mode, cues=cues, max_range_m=max_range_m,

@@ -18,13 +18,12 @@ import sys
 from contextlib import contextmanager
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from edge import cues  # noqa: E402
 from edge.io import open_frames  # noqa: E402
 from edge.meta import SensorSpec  # noqa: E402
+from edge.metrics import confusion, frame_scores  # noqa: E402
 from edge.preprocess import valid_mask  # noqa: E402
 
 
@@ -38,10 +37,9 @@ def _unlimited_reach():
         cues.REACH_M = kept
 
 
-def _iou(mask: np.ndarray, label: np.ndarray, valid: np.ndarray) -> float:
-    m, g = mask & valid, (label > 0) & valid
-    union = int((m | g).sum())
-    return 100.0 * int((m & g).sum()) / union if union else 100.0
+def _frame_iou(seg, depth, label) -> float:
+    """IoU in % of one frame, scored as depthseg-eval scores (`valid_mask`: its labels decide what counts)."""
+    return 100.0 * frame_scores(confusion(seg.predict(depth).mask == 1, label, valid_mask(depth))).iou
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -66,13 +64,12 @@ def main(argv: list[str] | None = None) -> int:
                 old = cues.fit_dominant_plane(d, v)
             if (old.a, old.b, old.c) == (new.a, new.b, new.c):
                 continue
-            line = f"  frame {i}: plane depth at the centre {1 / (old.a * d.shape[1] / 2 + old.b * d.shape[0] / 2 + old.c):.3f}"
-            line += f" -> {1 / (new.a * d.shape[1] / 2 + new.b * d.shape[0] / 2 + new.c):.3f} m"
+            centre = (d.shape[0] // 2, d.shape[1] // 2)
+            line = f"  frame {i}: plane depth at the centre {old.depth(d.shape)[centre]:.3f} -> {new.depth(d.shape)[centre]:.3f} m"
             if seg is not None and f.label is not None:
-                ok = np.isfinite(d) & (d > 0)
-                after = _iou(seg.predict(d).mask, f.label, ok)
+                after = _frame_iou(seg, d, f.label)
                 with _unlimited_reach():
-                    before = _iou(seg.predict(d).mask, f.label, ok)
+                    before = _frame_iou(seg, d, f.label)
                 line += f"; IoU {before:.2f} -> {after:.2f}"
             changed.append(line)
         print(f"{src}: the plane changed on {len(changed)} of {n} frames")
