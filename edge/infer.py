@@ -47,12 +47,14 @@ __all__ = [
     "OUTPUT_LOGITS",
     "OUTPUT_PROB",
     "OUTPUT_VALID",
+    "OUTPUT_HEIGHT",
 ]
 
 INPUT_NAME = "depth"
 OUTPUT_LOGITS = "logits"
 OUTPUT_PROB = "probability"
 OUTPUT_VALID = "valid"
+OUTPUT_HEIGHT = "height"  # --with-preprocessing graphs of models with the height cue: metres above the support
 
 
 class Predictor(Protocol):
@@ -204,7 +206,7 @@ class Segmenter:
         names = [o.name for o in outputs]
         self.with_preprocessing = OUTPUT_PROB in names or self.props.get("graph") == "with-preprocessing"
         self._out_main = OUTPUT_PROB if OUTPUT_PROB in names else names[0]
-        self._out_names = [self._out_main] + ([OUTPUT_VALID] if OUTPUT_VALID in names else [])
+        self._out_names = [self._out_main] + [n for n in (OUTPUT_VALID, OUTPUT_HEIGHT) if n in names]
         shape = inputs[0].shape
         if self.with_preprocessing:
             if len(shape) != 3:
@@ -294,11 +296,13 @@ class Segmenter:
             t2 = time.perf_counter()
             graph_prob = check_logits(outs[0][0], self.name)
             logits = logit(np.asarray(graph_prob, dtype=np.float32))
-            if len(outs) > 1:
-                valid = outs[1][0].astype(bool, copy=False)
-            else:
-                valid = valid_for(d, self.meta)
-            height = support_height(d, valid) if self.min_height_m > 0 else None
+            got = dict(zip(self._out_names, outs))
+            valid = got[OUTPUT_VALID][0].astype(bool, copy=False) if OUTPUT_VALID in got else valid_for(d, self.meta)
+            height = None
+            if self.min_height_m > 0:
+                # the graph's own height output is the plane its network saw (no second fit);
+                # graphs without it (no height cue, older exports) get the numpy fit
+                height = self._graph_height(got[OUTPUT_HEIGHT][0], d.shape) if OUTPUT_HEIGHT in got else support_height(d, valid)
         else:
             pre = preprocess_for(d, self.meta)
             valid = pre.valid
@@ -322,6 +326,16 @@ class Segmenter:
             "total": (t3 - t0) * 1e3,
         }
         return Prediction(mask=mask, valid=valid, timings=timings, logits=logits, graph_prob=graph_prob, height_m=height)
+
+    def _graph_height(self, height: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        """A graph's ``height`` output, if it is a finite float map of the frame's shape (else `ModelError`)."""
+        h = np.asarray(height)
+        if h.shape != tuple(shape) or h.dtype.kind != "f" or not np.isfinite(np.sum(h, dtype=np.float64)):
+            raise ModelError(
+                f"{self.name}: its '{OUTPUT_HEIGHT}' output is not a finite float map of the frame's size "
+                f"(shape {h.shape}, dtype {h.dtype}); the model file is broken (re-export it)"
+            )
+        return h
 
     def _height(self, depth: np.ndarray, pre) -> np.ndarray:
         """Metres above the support for the height rule: the model's own height cue when it has

@@ -33,7 +33,12 @@ int8 quantiser, which quantises every ``Add``, leaves the preprocessing alone.
 
 Graph I/O: input ``depth`` float32 [N, H, W] (metres, the sensor's H x W), outputs
 ``probability`` float32 [N, H, W] and ``valid`` bool [N, H, W] (so the caller can mark invalid
-pixels unknown without recomputing it). The frame size is fixed by the sensor in the metadata.
+pixels unknown without recomputing it), and for a model with the height cue ``height`` float32
+[N, H, W]: metres above the dominant plane the network saw (the cue channel / ``HEIGHT_SCALE``,
+clipped like it, 0 at invalid pixels). Why the third: the height rule (`edge.postprocess`,
+``min_height_m``) needs that plane; without it a caller would fit it a second time (``Segmenter``
+did, ~0.4 ms a frame) or, in C++, reimplement the RANSAC. The frame size is fixed by the sensor
+in the metadata.
 """
 
 from __future__ import annotations
@@ -62,7 +67,7 @@ from edge.cues import (
     hypothesis_table,
 )
 from edge.errors import ModelError
-from edge.infer import INPUT_NAME, OUTPUT_PROB, OUTPUT_VALID, sigmoid
+from edge.infer import INPUT_NAME, OUTPUT_HEIGHT, OUTPUT_PROB, OUTPUT_VALID, sigmoid
 from edge.io import atomic_path
 from edge.meta import ModelMeta
 from edge.preprocess import ROBUST_CLIP, STD_FLOOR, padded_shape
@@ -73,6 +78,7 @@ from export.onnx_export import OPSET, export_props, quiet_export, set_metadata, 
 __all__ = [
     "EdgeGraph",
     "PreprocGraph",
+    "edge_outputs",
     "export_with_preprocessing",
     "export_preprocessing",
     "check_supported",
@@ -424,6 +430,11 @@ class PreprocGraph(nn.Module):
         return F.pad(x, (0, self.wp - self.w, 0, self.hp - self.h)), valid
 
 
+def edge_outputs(meta: ModelMeta) -> list[str]:
+    """The output names of `EdgeGraph` for ``meta``: probability, valid, and height with the height cue."""
+    return [OUTPUT_PROB, OUTPUT_VALID] + ([OUTPUT_HEIGHT] if "height" in meta.cues else [])
+
+
 class EdgeGraph(nn.Module):
     """`PreprocGraph` + FCN-8s + crop + sigmoid as one module (see the module docstring)."""
 
@@ -433,11 +444,17 @@ class EdgeGraph(nn.Module):
         self.pre = PreprocGraph(meta)
         self.model = folded(model.eval())  # the affine head as two matrix products (export.fold)
         self.h, self.w = meta.sensor.height, meta.sensor.width
+        # the height cue's channel in the network input, None without the cue
+        self.height_ch = meta.in_channels + meta.cues.index("height") if "height" in meta.cues else None
 
-    def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, ...]:
         x, valid = self.pre(depth)
         logits = self.model(x)[:, 0, : self.h, : self.w]
-        return torch.sigmoid(logits), valid
+        if self.height_ch is None:
+            return torch.sigmoid(logits), valid
+        # metres, as edge.postprocess.support_height: the same float32 division of the same cue
+        height = x[:, self.height_ch, : self.h, : self.w] / HEIGHT_SCALE
+        return torch.sigmoid(logits), valid, height
 
 
 def _export(module: nn.Module, meta: ModelMeta, out: str | Path, output_names: list[str]):
@@ -477,11 +494,12 @@ def export_with_preprocessing(
     Raises a one-line `ModelError` when the graph cannot express the model's preprocessing
     (`check_supported`) or the exporter fails.
     """
-    proto = _export(EdgeGraph(model, meta), meta, out, [OUTPUT_PROB, OUTPUT_VALID])
+    names = edge_outputs(meta)
+    proto = _export(EdgeGraph(model, meta), meta, out, names)
     s = meta.sensor
     proto.doc_string = (
         f"depthseg edge model: raw depth [N,{s.height},{s.width}] metres (0/NaN/neg/inf invalid) -> "
-        f"probability [N,{s.height},{s.width}], valid [N,{s.height},{s.width}]"
+        + ", ".join(f"{n} [N,{s.height},{s.width}]" for n in names)
     )
     props = {"graph": "with-preprocessing", "preprocessing_graph": f"standardize={meta.standardize}; cues={list(meta.cues)}"}
     set_metadata(proto, export_props(meta, props | (extra_props or {})))
@@ -502,25 +520,38 @@ def export_preprocessing(meta: ModelMeta, out: str | Path) -> Path:
 
 @dataclass(frozen=True)
 class PreprocCheck:
+    """Outcome of comparing a --with-preprocessing file with the Python path on the same frames.
+
+    ``max_abs_height_diff_m``: the graph's ``height`` output against `edge.postprocess.support_height`
+    (None for a graph without that output); ``height_tolerance_m`` is ``HEIGHT_ATOL_CM`` in metres.
+    """
+
     frames: int
     source: str
     max_abs_prob_diff: float
     tolerance: float
     valid_mismatch: int
     flip_fraction: float
+    max_abs_height_diff_m: float | None = None
+    height_tolerance_m: float = HEIGHT_ATOL_CM / HEIGHT_SCALE
 
     @property
     def ok(self) -> bool:
-        return self.max_abs_prob_diff <= self.tolerance and self.valid_mismatch == 0
+        height_ok = self.max_abs_height_diff_m is None or self.max_abs_height_diff_m <= self.height_tolerance_m
+        return self.max_abs_prob_diff <= self.tolerance and self.valid_mismatch == 0 and height_ok
 
     def to_dict(self) -> dict:
         return asdict(self) | {"ok": self.ok}
 
     def summary(self) -> str:
+        height = (
+            "" if self.max_abs_height_diff_m is None
+            else f", max |height diff| {self.max_abs_height_diff_m:.2e} m (tolerance {self.height_tolerance_m:.0e})"
+        )
         return (
             f"check vs the Python path (edge.preprocess + PyTorch) on {self.source}: max |prob diff| "
             f"{self.max_abs_prob_diff:.2e} (tolerance {self.tolerance:.0e}), valid-mask mismatches {self.valid_mismatch}, "
-            f"mask flips {100 * self.flip_fraction:.4f} % of valid pixels"
+            f"mask flips {100 * self.flip_fraction:.4f} % of valid pixels{height}"
         )
 
 
@@ -529,10 +560,12 @@ def check_against_python(
 ) -> PreprocCheck:
     """Run the self-contained file through `Segmenter` and compare with the Python path; raise above tolerance."""
     from edge.infer import Segmenter
+    from edge.postprocess import support_height
     from edge.preprocess import valid_for
 
     seg = Segmenter(onnx_path, threads=threads)
-    worst, mism, flips, n_valid = 0.0, 0, 0, 0
+    has_height = OUTPUT_HEIGHT in {o.name for o in seg.session.get_outputs()}
+    worst, mism, flips, n_valid, worst_h = 0.0, 0, 0, 0, 0.0
     for d in frames:
         pred = seg.predict(d)
         ref_p = sigmoid(torch_logits(model, meta, d))
@@ -541,6 +574,9 @@ def check_against_python(
         mism += int(np.count_nonzero(pred.valid != ref_v))
         flips += int(np.count_nonzero(((pred.prob >= seg.threshold) != (ref_p >= seg.threshold)) & ref_v))
         n_valid += int(ref_v.sum())
+        if has_height:
+            (h,) = seg.session.run([OUTPUT_HEIGHT], {seg.input_name: np.asarray(d, np.float32)[None]})
+            worst_h = max(worst_h, float(np.max(np.abs(h[0] - support_height(d, ref_v)))))
     check = PreprocCheck(
         frames=len(frames),
         source=source or f"{len(frames)} frames",
@@ -548,6 +584,7 @@ def check_against_python(
         tolerance=PROB_ATOL,
         valid_mismatch=mism,
         flip_fraction=flips / max(n_valid, 1),
+        max_abs_height_diff_m=worst_h if has_height else None,
     )
     if not check.ok:
         raise ModelError(f"{onnx_path}: self-contained graph differs from the Python path: {check.summary()}")

@@ -4,7 +4,8 @@ Built with onnx.helper (no torch), so these tests run on the edge path alone and
 real exported FCN-8s is covered in tests/export.
 - `linear_model`: logits = -K * standardised depth + B (nearer than the frame mean = object),
   the same [N, C, H, W] -> [N, 1, H, W] contract as an exported model.
-- `raw_model`: the --with-preprocessing contract: raw depth [N, H, W] -> probability, valid.
+- `raw_model`: the --with-preprocessing contract: raw depth [N, H, W] -> probability, valid
+  (and optionally a ``height`` output, well-formed or broken).
 """
 
 from __future__ import annotations
@@ -62,8 +63,13 @@ def linear_model(path: Path, channels: int = 1, threshold: float = 0.5, k: float
     return _save(g, meta, path)
 
 
-def raw_model(path: Path, cut: float = 0.3, height: int = 171, width: int = 224) -> Path:
-    """probability = sigmoid(40 * (cut - depth)) on valid pixels; valid = finite and > 0."""
+def raw_model(path: Path, cut: float = 0.3, height: int = 171, width: int = 224, height_output: str | None = None) -> Path:
+    """probability = sigmoid(40 * (cut - depth)) on valid pixels; valid = finite and > 0.
+
+    ``height_output``: None (no ``height`` output, like a model without the height cue),
+    ``"cut"`` (metres above a flat support at ``cut``: cut - depth, 0 at invalid pixels),
+    ``"nan"`` (NaN everywhere: a broken graph) or ``"row"`` (one row per frame: the wrong shape).
+    """
     from onnx import TensorProto, helper, numpy_helper
 
     meta = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True, in_channels=1)
@@ -84,10 +90,15 @@ def raw_model(path: Path, cut: float = 0.3, height: int = 171, width: int = 224)
         helper.make_node("Mul", ["diff", "gain"], ["z"]),
         helper.make_node("Sigmoid", ["z"], ["probability"]),
     ]
-    g = helper.make_graph(
-        nodes, "raw",
-        [helper.make_tensor_value_info("depth", TensorProto.FLOAT, ["N", height, width])],
-        [helper.make_tensor_value_info("probability", TensorProto.FLOAT, ["N", height, width]),
-         helper.make_tensor_value_info("valid", TensorProto.BOOL, ["N", height, width])], consts,
-    )
+    outputs = [helper.make_tensor_value_info("probability", TensorProto.FLOAT, ["N", height, width]),
+               helper.make_tensor_value_info("valid", TensorProto.BOOL, ["N", height, width])]
+    if height_output is not None:
+        nodes += {
+            "cut": [helper.make_node("Identity", ["diff"], ["height"])],
+            "nan": [helper.make_node("Div", ["zero", "zero"], ["nan0"]), helper.make_node("Add", ["diff", "nan0"], ["height"])],
+            "row": [helper.make_node("ReduceMax", ["diff"], ["height"], axes=[1], keepdims=1)],
+        }[height_output]
+        outputs.append(helper.make_tensor_value_info("height", TensorProto.FLOAT, ["N", "HH", "WW"]))
+    g = helper.make_graph(nodes, "raw", [helper.make_tensor_value_info("depth", TensorProto.FLOAT, ["N", height, width])],
+                          outputs, consts)
     return _save(g, meta, path, {"graph": "with-preprocessing"})

@@ -171,7 +171,7 @@ def test_eval_names_the_labels_meaning_and_the_flag_for_it(capsys, linear_onnx, 
 
 def test_a_model_with_the_height_cue_reuses_it_and_a_raw_graph_fits_the_plane(tmp_path) -> None:
     # the shipped model takes the height cue: the rule reads that channel (no second plane fit);
-    # a --with-preprocessing graph returns no cue, so the rule fits the plane itself: same heights
+    # a --with-preprocessing graph without a height output fits the plane itself: same heights
     from onnxgen import raw_model
 
     d = synthetic_frames(1, 11).depth[0]
@@ -183,6 +183,34 @@ def test_a_model_with_the_height_cue_reuses_it_and_a_raw_graph_fits_the_plane(tm
     q = raw.predict(d)
     assert raw.with_preprocessing
     np.testing.assert_array_equal(q.height_m, support_height(d, q.valid))
+
+
+def test_a_graph_with_a_height_output_gives_the_rule_its_heights(tmp_path) -> None:
+    # a --with-preprocessing graph of a model with the height cue returns that cue in metres:
+    # the rule takes it as it is (the plane the network saw), with no second fit in numpy
+    from onnxgen import raw_model
+
+    d = synthetic_frames(1, 11).depth[0]  # table 0.22-0.23 m away, objects ~10 cm nearer
+    cut = 0.232  # a flat support just behind most of the table: those table pixels are low "objects"
+    seg = Segmenter(raw_model(tmp_path / "h.onnx", cut, d.shape[0], d.shape[1], height_output="cut"),
+                    threads=1, min_height_m=0.01)
+    p = seg.predict(d)
+    expect = np.where(np.isfinite(d) & (d > 0), np.float32(cut) - d, np.float32(0.0))
+    np.testing.assert_array_equal(p.height_m, expect)
+    assert not np.array_equal(p.height_m, support_height(d, p.valid))  # the graph's, not a refit
+    low = p.valid & (p.prob >= 0.5) & (p.height_m < 0.01)
+    assert low.any() and not (p.mask[low] == 1).any()  # the rule ran on the graph's heights
+
+
+@pytest.mark.parametrize("kind", ["nan", "row"])
+def test_a_broken_height_output_is_a_one_line_model_error(tmp_path, kind) -> None:
+    from onnxgen import raw_model
+
+    d = synthetic_frames(1, 11).depth[0]
+    path = raw_model(tmp_path / f"{kind}.onnx", height=d.shape[0], width=d.shape[1], height_output=kind)
+    with pytest.raises(ModelError, match="'height' output is not a finite float map"):
+        Segmenter(path, threads=1, min_height_m=0.01).predict(d)
+    assert Segmenter(path, threads=1).predict(d).height_m is None  # rule off: the output is not read
 
 
 def test_both_paths_agree_with_a_plain_labelling() -> None:

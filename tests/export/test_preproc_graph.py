@@ -36,6 +36,7 @@ def test_graph_equals_the_python_path_on_frames_with_dead_pixels(graphs):
     frames = dead_pixel_frames(2) + blensor_frames(2)
     check = check_against_python(path, model, meta, frames)
     assert check.ok and check.valid_mismatch == 0 and check.max_abs_prob_diff <= PROB_ATOL
+    assert check.max_abs_height_diff_m is None  # no height cue, no height output
     seg = Segmenter(path, threads=1)
     assert seg.with_preprocessing
     for d in frames[3:5]:  # the NaN/negative/inf frame and the all-invalid one, checked by hand too
@@ -242,6 +243,28 @@ def test_robust_height_model_with_preprocessing_equals_the_python_path(robust_he
     assert 0 < np.mean(both) < 1  # both classes present: the comparison is not vacuous
     check = check_against_python(path, model, meta, cue_frames[:4], threads=1)
     assert check.ok and check.valid_mismatch == 0
+    assert check.max_abs_height_diff_m is not None and "max |height diff|" in check.summary()
+
+
+def test_a_height_cue_graph_returns_the_heights_the_height_rule_needs(robust_height, cue_frames):
+    from edge.cues import HEIGHT_SCALE
+    from edge.postprocess import support_height
+    from export.preproc_graph import HEIGHT_ATOL_CM
+
+    _model, _meta, path, plain = robust_height
+    proto = onnx.load(str(path), load_external_data=False)
+    assert [o.name for o in proto.graph.output] == ["probability", "valid", "height"]
+    seg, ref = Segmenter(path, threads=1, min_height_m=0.01), Segmenter(plain, threads=1, min_height_m=0.01)
+    off = Segmenter(path, threads=1)
+    agree, n_valid, removed = 0, 0, 0
+    for f in cue_frames:
+        a, b = seg.predict(f), ref.predict(f)
+        np.testing.assert_allclose(a.height_m, support_height(f, a.valid), rtol=0, atol=HEIGHT_ATOL_CM / HEIGHT_SCALE)
+        agree += int(np.count_nonzero((a.mask == b.mask) & b.valid))
+        n_valid += int(b.valid.sum())
+        removed += int(np.count_nonzero((off.predict(f).mask == 1) & (a.mask == 0)))
+    assert agree / n_valid >= 0.999
+    assert removed > 0  # the height rule changed pixels: the comparison is not vacuous
 
 
 def test_unsupported_preprocessing_is_one_line_model_error(monkeypatch, tmp_path):
@@ -262,3 +285,12 @@ def test_unsupported_preprocessing_is_one_line_model_error(monkeypatch, tmp_path
     with pytest.raises(ModelError, match="first conv takes 3 channels but its metadata says 2") as err:
         pg.check_supported(meta.with_(in_channels=1, cues=("height",)), model)
     assert not (tmp_path / "x.onnx").exists()
+
+
+def test_a_height_output_off_the_numpy_plane_fails_the_check():
+    from export.preproc_graph import PreprocCheck
+
+    base = dict(frames=1, source="x", max_abs_prob_diff=0.0, tolerance=PROB_ATOL, valid_mismatch=0, flip_fraction=0.0)
+    assert PreprocCheck(**base).ok and PreprocCheck(**base, max_abs_height_diff_m=0.0).ok
+    bad = PreprocCheck(**base, max_abs_height_diff_m=1e-3)  # 1 mm: another plane
+    assert not bad.ok and "max |height diff| 1.00e-03 m" in bad.summary()
