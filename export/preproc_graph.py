@@ -411,6 +411,16 @@ class PreprocGraph(nn.Module):
         return F.pad(inner, (k, k, k, k))
 
     def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        planes, valid = self.planes(depth)
+        return self.assemble(planes), valid
+
+    def assemble(self, planes: list[torch.Tensor]) -> torch.Tensor:
+        """The network input [N, C, Hp, Wp] from `planes`' channels (zero padding bottom/right)."""
+        x = torch.stack(planes, dim=1) if len(planes) > 1 else planes[0].unsqueeze(1)
+        return F.pad(x, (0, self.wp - self.w, 0, self.hp - self.h))
+
+    def planes(self, depth: torch.Tensor) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """The input channels [N, H, W] each (depth copies, then the cues in ``meta.cues`` order), and valid."""
         valid = torch.isfinite(depth) & (depth > 0) & (depth <= self.max_range)
         d = torch.where(valid, depth, torch.zeros_like(depth)).to(_F64)
         if self.robust:
@@ -426,8 +436,7 @@ class PreprocGraph(nn.Module):
                 planes.append(self._height(depth, valid))
             elif cue == "steepness":
                 planes.append(self._steepness(depth, valid))
-        x = torch.stack(planes, dim=1) if len(planes) > 1 else z.unsqueeze(1)
-        return F.pad(x, (0, self.wp - self.w, 0, self.hp - self.h)), valid
+        return planes, valid
 
 
 def edge_outputs(meta: ModelMeta) -> list[str]:
@@ -448,13 +457,13 @@ class EdgeGraph(nn.Module):
         self.height_ch = meta.in_channels + meta.cues.index("height") if "height" in meta.cues else None
 
     def forward(self, depth: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        x, valid = self.pre(depth)
-        logits = self.model(x)[:, 0, : self.h, : self.w]
+        planes, valid = self.pre.planes(depth)
+        logits = self.model(self.pre.assemble(planes))[:, 0, : self.h, : self.w]
         if self.height_ch is None:
             return torch.sigmoid(logits), valid
-        # metres, as edge.postprocess.support_height: the same float32 division of the same cue
-        height = x[:, self.height_ch, : self.h, : self.w] / HEIGHT_SCALE
-        return torch.sigmoid(logits), valid, height
+        # metres, as edge.postprocess.support_height: the same float32 division of the same cue.
+        # Taken from the cue itself, not from the assembled input, which --int8 quantises.
+        return torch.sigmoid(logits), valid, planes[self.height_ch] / HEIGHT_SCALE
 
 
 def _export(module: nn.Module, meta: ModelMeta, out: str | Path, output_names: list[str]):

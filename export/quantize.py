@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from edge.errors import DataError, ModelError
-from edge.infer import Segmenter, session_options
+from edge.infer import OUTPUT_HEIGHT, Segmenter, session_options
 from edge.preprocess import preprocess_for
 from edge.sampleframes import FrameSample
 
@@ -163,6 +163,9 @@ class Int8Report:
     max_abs_prob_diff: float
     max_drop: float = MAX_IOU_DROP
     layers: dict[str, dict[str, int]] = field(default_factory=dict)
+    # a --with-preprocessing graph's `height` output, int8 vs fp32 file (None without one). Its path
+    # holds no quantised op (QUANT_OPS), so anything but 0 means the quantiser reached the cue
+    max_abs_height_diff_m: float | None = None
 
     @property
     def drop(self) -> float:
@@ -170,7 +173,7 @@ class Int8Report:
 
     @property
     def ok(self) -> bool:
-        return self.drop <= self.max_drop
+        return self.drop <= self.max_drop and not self.max_abs_height_diff_m
 
     def to_dict(self) -> dict:
         return asdict(self) | {"drop": self.drop, "ok": self.ok}
@@ -180,6 +183,7 @@ class Int8Report:
             f"int8 vs fp32 on {self.source}: IoU {self.iou_fp32:.2f} -> {self.iou_int8:.2f} "
             f"({-self.drop:+.2f} points; limit -{self.max_drop:.1f}), int8/fp32 mask agreement IoU "
             f"{self.agreement_iou:.2f} %, max |prob diff| {self.max_abs_prob_diff:.3f}"
+            + ("" if self.max_abs_height_diff_m is None else f", max |height diff| {self.max_abs_height_diff_m:.2e} m (must be 0)")
         )
 
     def layers_summary(self) -> str:
@@ -207,10 +211,28 @@ def iou_report(fp32_path: str | Path, int8_path: str | Path, val: FrameSample, t
         agreement_iou=100.0 * pooled_iou([p.mask for p in pb], [p.mask == 1 for p in pa], valids),
         max_abs_prob_diff=float(max(np.max(np.abs(x.prob - y.prob)) for x, y in zip(pa, pb))),
         layers=int8_layers(int8_path),
+        max_abs_height_diff_m=_height_diff(a, b, val.depth),
     )
 
 
+def _height_diff(a: Segmenter, b: Segmenter, frames: list[np.ndarray]) -> float | None:
+    """Largest |difference| of two --with-preprocessing graphs' ``height`` outputs; None if either has none."""
+    if not all(OUTPUT_HEIGHT in {o.name for o in s.session.get_outputs()} for s in (a, b)):
+        return None
+    worst = 0.0
+    for d in frames:
+        feed = np.ascontiguousarray(d, dtype=np.float32)[None]
+        (ha,), (hb,) = (s.session.run([OUTPUT_HEIGHT], {s.input_name: feed}) for s in (a, b))
+        worst = max(worst, float(np.max(np.abs(ha - hb))))
+    return worst
+
+
 def refuse_message(report: Int8Report) -> str:
+    if report.max_abs_height_diff_m:
+        return (
+            f"int8 quantisation changed the graph's height output by up to {report.max_abs_height_diff_m:.2e} m on "
+            f"{report.source}; not written. Report it as a bug, or pass `force` to keep it"
+        )
     return (
         f"int8 model loses {report.drop:.2f} IoU points against fp32 (limit {report.max_drop:.1f}) on {report.source}; "
         "not written. Calibrate on more frames (`calib` DIR) or pass `force` to keep it"

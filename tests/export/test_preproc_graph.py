@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import onnx
 import pytest
@@ -294,3 +296,17 @@ def test_a_height_output_off_the_numpy_plane_fails_the_check():
     assert PreprocCheck(**base).ok and PreprocCheck(**base, max_abs_height_diff_m=0.0).ok
     bad = PreprocCheck(**base, max_abs_height_diff_m=1e-3)  # 1 mm: another plane
     assert not bad.ok and "max |height diff| 1.00e-03 m" in bad.summary()
+
+
+def test_int8_leaves_the_height_output_exact(robust_height, tmp_path):
+    # --int8 quantises the network's input; the height output comes from the cue before it
+    from edge.sampleframes import synthetic_frames
+    from export import quantize
+
+    _model, _meta, path, _plain = robust_height
+    q = quantize.quantize_int8(path, tmp_path / "int8.onnx", synthetic_frames(4, 0))
+    rep = quantize.iou_report(path, q, synthetic_frames(3, 50), threads=1)
+    assert rep.layers["int8"].get("QLinearConv", 0) > 0  # the network did go int8
+    assert rep.max_abs_height_diff_m == 0.0 and "max |height diff| 0.00e+00 m" in rep.summary()
+    bad = dataclasses.replace(rep, max_abs_height_diff_m=0.004)  # the quantiser reaching the cue
+    assert not bad.ok and "changed the graph's height output by up to 4.00e-03 m" in quantize.refuse_message(bad)
