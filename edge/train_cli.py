@@ -77,6 +77,9 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--jaccard", type=float, default=0.0, metavar="WEIGHT",
                    help="add WEIGHT x (1 - soft IoU of the object class, per frame) to the masked BCE, towards "
                    "the per-frame IoU that eval reports (e.g. 0.5; default 0 = BCE alone)")
+    t.add_argument("--boundary-weight", type=float, default=0.0, metavar="WEIGHT",
+                   help="pixels within 2 px of a label boundary weigh 1 + WEIGHT in the masked BCE, where the "
+                   "model's errors sit (e.g. 2; default 0 = every pixel alike)")
     t.add_argument("--patience", type=int, default=10, help="stop after this many epochs without a better val loss")
     t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
     t.add_argument("--no-augment", action="store_true", help="disable flips")
@@ -153,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
             epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, lr_schedule=args.lr_schedule,
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
-            ema=args.ema, jaccard=args.jaccard, memory_format=args.memory_format, precision=args.precision,
+            ema=args.ema, jaccard=args.jaccard, boundary=args.boundary_weight, memory_format=args.memory_format,
+            precision=args.precision,
         )
         from edge.train.encoders import list_encoders
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from edge.train.losses import soft_jaccard
+from edge.train.losses import boundary_band, soft_jaccard
 
 __all__ = ["Dist", "env_world", "is_main_process", "local_world_size"]
 
@@ -95,24 +95,31 @@ class Dist:
         return tuple(torch.from_numpy(np.ascontiguousarray(a[self.rank :: self.world])).to(self.device) for a in arrays)
 
     def loss(self, logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor,
-             jaccard: float = 0.0) -> tuple[torch.Tensor, float]:
+             jaccard: float = 0.0, boundary: float = 0.0) -> tuple[torch.Tensor, float]:
         """(loss to back-propagate, masked BCE of the global batch for the log).
 
         Args:
             logits, target, mask: this rank's slice of the batch, [b, 1, H, W] each.
             jaccard: weight of the per-frame soft Jaccard term (`soft_jaccard`), averaged over the
                 frames of the global batch; 0 = masked BCE alone.
+            boundary: extra weight of the pixels near label boundaries (`boundary_band`): the BCE
+                becomes a weighted mean with weight 1 + ``boundary`` there, 1 elsewhere; 0 = off.
+                The logged value stays the plain masked BCE.
         """
         pix = torch.nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none")
         local_sum, local_n = (pix * mask).sum(), mask.sum()
         jac = soft_jaccard(logits, target, mask).sum() if jaccard > 0 else None
+        wmask = mask * (1.0 + boundary * boundary_band(target)) if boundary > 0 else None
         if not self.enabled:
             bce = local_sum / local_n.clamp_min(1.0)
-            loss = bce if jac is None else bce + jaccard * jac / max(logits.shape[0], 1)
+            main = bce if wmask is None else (pix * wmask).sum() / wmask.sum().clamp_min(1.0)
+            loss = main if jac is None else main + jaccard * jac / max(logits.shape[0], 1)
             return loss, float(bce.detach())
-        s = self.all_sum([float(local_sum.detach()), float(local_n), float(logits.shape[0])])
+        w_sum = None if wmask is None else (pix * wmask).sum()
+        s = self.all_sum([float(local_sum.detach()), float(local_n), float(logits.shape[0]),
+                          0.0 if wmask is None else float(wmask.sum())])
         n = max(s[1], 1.0)
-        loss = local_sum * (self.world / n)
+        loss = local_sum * (self.world / n) if w_sum is None else w_sum * (self.world / max(s[3], 1.0))
         if jac is not None:
             loss = loss + jaccard * jac * (self.world / max(s[2], 1.0))
         return loss, s[0] / n

@@ -16,6 +16,9 @@ Differences from the paper, and why:
   (`edge.train.losses.soft_jaccard`) to the masked BCE, so training pulls towards the
   per-frame IoU users read. Validation loss, early stopping and the logged train loss stay
   masked BCE, comparable across runs with and without it.
+- ``boundary`` (optional): pixels within 2 px of a label boundary weigh 1 + ``boundary`` in the
+  masked BCE (`edge.train.losses.boundary_band`), where the model's remaining errors sit; the
+  logged and validation losses stay the plain masked BCE.
 - ``memory_format`` "channels_last" (the default): weights and inputs are kept channels-last
   (NHWC) on the CPU. Why: the compact models have 8-64 channels at up to full resolution, where
   oneDNN's NCHW convolutions spend most of their time reordering; NHWC made a training step
@@ -77,6 +80,7 @@ class TrainConfig:
     encoder_weights: str | None = None
     ema: float = 0.0  # decay of the weight average per step; 0 = off (the last step's weights)
     jaccard: float = 0.0  # weight of the per-frame soft Jaccard term added to masked BCE; 0 = off
+    boundary: float = 0.0  # extra BCE weight of pixels within 2 px of a label boundary; 0 = off
     memory_format: str = "channels_last"  # "channels_last" (NHWC, faster on CPU) or "contiguous" (NCHW)
     precision: str = "fp32"  # of the training forward pass: "fp32" or "bf16" (autocast; faster with AMX)
 
@@ -93,6 +97,8 @@ class TrainConfig:
             raise ConfigError(f"ema decay must be in [0, 1) (0 = off, e.g. 0.999), got {self.ema}")
         if not (math.isfinite(self.jaccard) and self.jaccard >= 0):
             raise ConfigError(f"jaccard weight must be a number >= 0 (0 = off, e.g. 0.5), got {self.jaccard}")
+        if not (math.isfinite(self.boundary) and 0 <= self.boundary <= 100):
+            raise ConfigError(f"boundary weight must be a number in [0, 100] (0 = off, e.g. 2), got {self.boundary}")
         if self.memory_format not in MEMORY_FORMATS:
             raise ConfigError(
                 f"memory format must be one of {', '.join(MEMORY_FORMATS)}, got '{self.memory_format}'"
@@ -332,7 +338,7 @@ def train(
             x, t, m = dist.local(make_batch(train_set, idx, meta, rng if cfg.augment else None))
             with cfg.autocast(dist.device.type):
                 logits = net(x.contiguous(memory_format=fmt))
-            loss, lv = dist.loss(logits.float(), t, m, cfg.jaccard)  # the loss in float32 whatever the forward
+            loss, lv = dist.loss(logits.float(), t, m, cfg.jaccard, cfg.boundary)  # in float32 whatever the forward
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

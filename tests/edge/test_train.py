@@ -13,7 +13,7 @@ from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
 from edge.train.data import FrameSet, load_frames, make_batch, prepare_frames, prepared_bytes, split_indices
 from edge.train.loop import TrainConfig, train
-from edge.train.losses import masked_bce, soft_jaccard
+from edge.train.losses import boundary_band, masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
 
 META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True)
@@ -107,6 +107,8 @@ def test_split_is_deterministic_and_disjoint() -> None:
         (["--data", "x", "--out", "OUT", "--encoder", "resnet"], "unknown encoder"),
         (["--data", "x", "--out", "OUT", "--jaccard", "-1"], "jaccard weight"),
         (["--data", "x", "--out", "OUT", "--jaccard", "nan"], "jaccard weight"),
+        (["--data", "x", "--out", "OUT", "--boundary-weight", "-1"], "boundary weight"),
+        (["--data", "x", "--out", "OUT", "--boundary-weight", "inf"], "boundary weight"),
     ],
 )
 def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) -> None:
@@ -207,6 +209,29 @@ def test_jaccard_term_trains_and_is_recorded_while_the_logged_loss_stays_bce(tmp
     # ...but the term changes the gradient, so the weights part after the first step
     assert plain.history[-1]["train_loss"] != jac.history[-1]["train_loss"]
     assert read_checkpoint(tmp_path / "jac" / "best.pt")["meta"]["training"]["config"]["jaccard"] == 0.5
+
+
+def test_boundary_band_is_two_pixels_either_side_of_an_outline() -> None:
+    target = torch.zeros(1, 1, 12, 12)
+    target[0, 0, 3:9, 3:9] = 1  # a 6 x 6 object
+    band = boundary_band(target)[0, 0]
+    assert band.shape == (12, 12) and set(band.unique().tolist()) == {0.0, 1.0}
+    assert band[5, 1] == 1 and band[5, 2] == 1 and band[5, 3] == 1 and band[5, 4] == 1  # 2 px out, 2 px in
+    assert band[5, 0] == 0 and band[5, 5] == 0 and band[6, 6] == 0  # farther: the table, the interior
+    assert float(boundary_band(torch.zeros(1, 1, 8, 8)).sum()) == 0  # no object, no band
+    assert float(boundary_band(torch.ones(1, 1, 8, 8)).sum()) == 0  # one object filling the frame
+
+
+def test_boundary_weight_trains_and_is_recorded_while_the_logged_loss_stays_bce(tmp_path) -> None:
+    fs = _frames(16)
+    tr, va = fs.subset(np.arange(12)), fs.subset(np.arange(12, 16))
+    base = dict(epochs=2, batch_size=4, lr=1e-2, seed=0, threads=1)
+    plain = train(META, tr, va, tmp_path / "plain", TrainConfig(**base))
+    bw = train(META, tr, va, tmp_path / "bw", TrainConfig(**base, boundary=2.0))
+    b0 = [read_checkpoint(r / "last.pt")["batch_losses"][0] for r in (tmp_path / "plain", tmp_path / "bw")]
+    assert b0[0] == pytest.approx(b0[1], rel=1e-6)  # the same plain BCE of the same first weights
+    assert plain.history[-1]["train_loss"] != bw.history[-1]["train_loss"]  # but another gradient
+    assert read_checkpoint(tmp_path / "bw" / "best.pt")["meta"]["training"]["config"]["boundary"] == 2.0
 
 
 def test_a_wall_clock_budget_stops_early_and_says_so(tmp_path, capsys) -> None:

@@ -44,7 +44,8 @@ def _log(run: Path) -> list[dict[str, float]]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("loss", [[], ["--jaccard", "0.5"], ["--precision", "bf16"]], ids=["bce", "bce+jaccard", "bf16"])
+@pytest.mark.parametrize("loss", [[], ["--jaccard", "0.5"], ["--boundary-weight", "2"], ["--precision", "bf16"]],
+                         ids=["bce", "bce+jaccard", "bce+boundary", "bf16"])
 def test_two_process_torchrun_matches_one_process_and_resumes(tmp_path, loss):
     _write(tmp_path / "train.mcap", 16, 0)
     _write(tmp_path / "val.mcap", 8, 1)

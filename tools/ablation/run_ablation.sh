@@ -15,9 +15,9 @@ cd "$(dirname "$0")/../.."
 BIN=.venv/bin
 COMMON="--limit 3000 --encoder vgg11 --batch-norm --in-channels 3 --standardize robust --extra-skip --epochs 6 \
  --batch-size 16 --lr 1e-3 --lr-schedule cosine --patience 6 --threads 2"
-row() {  # name data width cues [seed]
-  local name=$1 data=$2 width=$3 cues=$4 seed=${5:-0}
-  local extra=""; [ "$cues" != none ] && extra="--cues $cues"
+row() {  # name data width cues [seed [further depthseg-train flags]]
+  local name=$1 data=$2 width=$3 cues=$4 seed=${5:-0} flags=${6:-}
+  local extra="$flags"; [ "$cues" != none ] && extra="--cues $cues $flags"
   [ -f "runs/ablation/$name/best.pt" ] || $BIN/depthseg-train --data "$data" --out "runs/ablation/$name" --width "$width" $extra $COMMON --seed "$seed"
   $BIN/depthseg-export --model "runs/ablation/$name/best.pt" --single-channel --out "runs/ablation/$name/model.onnx" --data "$data"
 }
@@ -37,6 +37,11 @@ for r in $ROWS; do
     zhs_v19_s1) row zhs_v19_s1 data/train_v19 0.125 height,steepness 1 ;;
     zs_v19) row zs_v19 data/train_v19 0.125 steepness ;;
     z_v19) row z_v19 data/train_v19 0.125 none ;;
+    # boundary-weighted BCE (--boundary-weight: pixels within 2 px of a label outline weigh 1 + W)
+    # against zh_v19 / zh_v19_s1 above, same data and seeds
+    zhb2_v19) row zhb2_v19 data/train_v19 0.125 height 0 "--boundary-weight 2" ;;
+    zhb2_v19_s1) row zhb2_v19_s1 data/train_v19 0.125 height 1 "--boundary-weight 2" ;;
+    zhb5_v19) row zhb5_v19 data/train_v19 0.125 height 0 "--boundary-weight 5" ;;
     *) echo "unknown row $r" >&2; exit 2 ;;
   esac
 done
