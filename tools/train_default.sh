@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
-# Recipe of the shipped default model (edge/models/default.pt and default.onnx), v19d.
+# Recipe of the shipped default model (edge/models/default.pt and default.onnx), v20 (candidate B):
+# v19d's recipe with --boundary-weight 2 (pixels within 2 px of a label outline weigh 3x in the BCE;
+# BENCHMARKS.md "candidate B, results").
 #
-#   bash tools/train_default.sh            # 54-83 min on a 2-core AMD EPYC, by the day: 54.2 and 60.7 min on
-#                                          # 2026-12-02 (v19, v19c), 83.0 min on 2026-12-03 (v19d, a ~1.5x slower
-#                                          # machine); BENCHMARKS.md "candidate v19", "candidate v19d, results"
+#   bash tools/train_default.sh            # v19d's recipe took 54-83 min on a 2-core AMD EPYC, by the day: 54.2 and
+#                                          # 60.7 min on 2026-12-02 (v19, v19c), 83.0 min on 2026-12-03 (v19d, a ~1.5x
+#                                          # slower machine); v20's training alone 71.3 min on 2026-12-03 (its data was
+#                                          # v19d's, ~7 min of simulation not rerun); BENCHMARKS.md "candidate v19",
+#                                          # "candidate v19d, results", "candidate B, results"
 #   FRAMES=24000 bash tools/train_default.sh   # the previous default v12's data volume (~52-60 min)
 #
 # 1. simulate 32,000 labelled frames (seed 1; 4 camera views of each of 8,000 settled scenes, which
@@ -53,7 +57,7 @@ start=$(date +%s)
 $BIN/depthseg-sim --out "$DATA" --frames "$FRAMES" --seed 1 --workers 2 --config "$CONFIG"
 $BIN/depthseg-train --data "$DATA" --out "$RUN" --encoder vgg11 --batch-norm --width 0.125 \
   --in-channels 3 --cues height --standardize robust --extra-skip --full-skip --split 0.85,0.1,0.05 --split-unit frame --epochs "$EPOCHS" --batch-size 16 --lr 1e-3 --lr-schedule cosine \
-  --patience 6 ${MINUTES:+--max-minutes "$MINUTES"} --seed 0 --threads 2 --ema 0.999 $FLAGS
+  --patience 6 ${MINUTES:+--max-minutes "$MINUTES"} --seed 0 --threads 2 --ema 0.999 --boundary-weight 2 $FLAGS
 if [ "$INSTALL" = 1 ]; then
   cp "$RUN/best.pt" edge/models/default.pt
   $BIN/depthseg-export --model edge/models/default.pt --single-channel --out edge/models/default.onnx --data "$DATA"
