@@ -12,7 +12,9 @@ from torch import nn
 
 __all__ = ["masked_bce", "soft_jaccard", "boundary_band", "BOUNDARY_PX"]
 
-BOUNDARY_PX = 2  # the band of `boundary_band`: eval's default --boundary-px, where the model's errors sit
+# `boundary_band`'s half-width: 2 px on either side of an outline, where the model's errors sit (eval's
+# `edge.metrics.boundary_band` counts from the boundary pixels, so its default 2 reaches one pixel farther)
+BOUNDARY_PX = 2
 
 
 def masked_bce(logits: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
