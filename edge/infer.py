@@ -327,6 +327,23 @@ class Segmenter:
         }
         return Prediction(mask=mask, valid=valid, timings=timings, logits=logits, graph_prob=graph_prob, height_m=height)
 
+    @property
+    def has_height_output(self) -> bool:
+        """True for a --with-preprocessing graph that returns the height its network saw (``height``)."""
+        return OUTPUT_HEIGHT in self._out_names
+
+    def graph_height(self, depth: np.ndarray) -> np.ndarray | None:
+        """Metres above the support from the graph's ``height`` output for one frame; None without that output.
+
+        For checks that compare the graph's heights with the numpy fit or with another file
+        (`export.preproc_graph.check_against_python`, `export.quantize.iou_report`).
+        """
+        if not self.has_height_output:
+            return None
+        d = self._check_frame(depth)
+        (h,) = self.session.run([OUTPUT_HEIGHT], {self.input_name: np.ascontiguousarray(d, dtype=np.float32)[None]})
+        return self._graph_height(h[0], d.shape)
+
     def _graph_height(self, height: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
         """A graph's ``height`` output, if it is a finite float map of the frame's shape (else `ModelError`)."""
         h = np.asarray(height)

@@ -573,7 +573,7 @@ def check_against_python(
     from edge.preprocess import valid_for
 
     seg = Segmenter(onnx_path, threads=threads)
-    has_height = OUTPUT_HEIGHT in {o.name for o in seg.session.get_outputs()}
+    has_height = seg.has_height_output
     worst, mism, flips, n_valid, worst_h = 0.0, 0, 0, 0, 0.0
     for d in frames:
         pred = seg.predict(d)
@@ -584,8 +584,7 @@ def check_against_python(
         flips += int(np.count_nonzero(((pred.prob >= seg.threshold) != (ref_p >= seg.threshold)) & ref_v))
         n_valid += int(ref_v.sum())
         if has_height:
-            (h,) = seg.session.run([OUTPUT_HEIGHT], {seg.input_name: np.asarray(d, np.float32)[None]})
-            worst_h = max(worst_h, float(np.max(np.abs(h[0] - support_height(d, ref_v)))))
+            worst_h = max(worst_h, float(np.max(np.abs(seg.graph_height(d) - support_height(d, ref_v)))))
     check = PreprocCheck(
         frames=len(frames),
         source=source or f"{len(frames)} frames",

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from edge.errors import DataError, ModelError
-from edge.infer import OUTPUT_HEIGHT, Segmenter, session_options
+from edge.infer import Segmenter, session_options
 from edge.preprocess import preprocess_for
 from edge.sampleframes import FrameSample
 
@@ -217,14 +217,9 @@ def iou_report(fp32_path: str | Path, int8_path: str | Path, val: FrameSample, t
 
 def _height_diff(a: Segmenter, b: Segmenter, frames: list[np.ndarray]) -> float | None:
     """Largest |difference| of two --with-preprocessing graphs' ``height`` outputs; None if either has none."""
-    if not all(OUTPUT_HEIGHT in {o.name for o in s.session.get_outputs()} for s in (a, b)):
+    if not (a.has_height_output and b.has_height_output):
         return None
-    worst = 0.0
-    for d in frames:
-        feed = np.ascontiguousarray(d, dtype=np.float32)[None]
-        (ha,), (hb,) = (s.session.run([OUTPUT_HEIGHT], {s.input_name: feed}) for s in (a, b))
-        worst = max(worst, float(np.max(np.abs(ha - hb))))
-    return worst
+    return max((float(np.max(np.abs(a.graph_height(d) - b.graph_height(d)))) for d in frames), default=0.0)
 
 
 def refuse_message(report: Int8Report) -> str:

@@ -181,7 +181,7 @@ def test_a_model_with_the_height_cue_reuses_it_and_a_raw_graph_fits_the_plane(tm
     np.testing.assert_array_equal(p.height_m, support_height(d, p.valid))
     raw = Segmenter(raw_model(tmp_path / "raw.onnx", height=d.shape[0], width=d.shape[1]), threads=1, min_height_m=0.01)
     q = raw.predict(d)
-    assert raw.with_preprocessing
+    assert raw.with_preprocessing and not raw.has_height_output and raw.graph_height(d) is None
     np.testing.assert_array_equal(q.height_m, support_height(d, q.valid))
 
 
@@ -197,6 +197,7 @@ def test_a_graph_with_a_height_output_gives_the_rule_its_heights(tmp_path) -> No
     p = seg.predict(d)
     expect = np.where(np.isfinite(d) & (d > 0), np.float32(cut) - d, np.float32(0.0))
     np.testing.assert_array_equal(p.height_m, expect)
+    assert seg.has_height_output and np.array_equal(seg.graph_height(d), expect)  # the same output, alone
     assert not np.array_equal(p.height_m, support_height(d, p.valid))  # the graph's, not a refit
     low = p.valid & (p.prob >= 0.5) & (p.height_m < 0.01)
     assert low.any() and not (p.mask[low] == 1).any()  # the rule ran on the graph's heights
