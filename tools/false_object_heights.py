@@ -54,7 +54,10 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
 
     Returns:
         ``frames``, ``union`` (pixels), and in % of the union: ``fp_near`` and its parts
-        ``fp_near_table_level``, ``fp_near_raised_under_rule``, ``fp_near_over_rule``; ``fp_far``;
+        ``fp_near_table_level``, ``fp_near_raised_under_rule``, ``fp_near_over_rule``; ``fp_far``
+        and its parts ``fp_far_table_level``, ``fp_far_raised_under_rule``, ``fp_far_over_rule``
+        (false objects away from outlines: at table level a patch of table called object, raised a
+        flat thing on it that the labels call table);
         the missed object pixels in the band ``fn_near`` and the part of them at table level,
         ``fn_near_table_level`` (object surface that depth alone cannot tell from the table).
 
@@ -96,7 +99,8 @@ def height_split(data: Path, seg: Segmenter, boundary_px: int = 2, low_m: float 
 
     return {"frames": n, "union": t.union, "fp_near": pct(t.fp_boundary),
             **{f"fp_near_{name}": pct(b.fp_boundary) for name, b in c.items()},
-            "fp_far": pct(t.fp_far), "fn_near": pct(t.fn_boundary), "fn_near_table_level": pct(c["table_level"].fn_boundary)}
+            "fp_far": pct(t.fp_far), **{f"fp_far_{name}": pct(b.fp_far) for name, b in c.items()},
+            "fn_near": pct(t.fn_boundary), "fn_near_table_level": pct(c["table_level"].fn_boundary)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,7 +123,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.data}: {r['frames']} frames; false object in % of the union: within {args.boundary_px} px "
                   f"of outlines {r['fp_near']:.2f} = table level (< {args.low_mm:g} mm) {r['fp_near_table_level']:.2f}"
                   f" + raised under {args.rule_mm:g} mm {r['fp_near_raised_under_rule']:.2f} + over it "
-                  f"{r['fp_near_over_rule']:.2f}; farther {r['fp_far']:.2f}. Missed object within {args.boundary_px}"
+                  f"{r['fp_near_over_rule']:.2f}; farther {r['fp_far']:.2f} = table level {r['fp_far_table_level']:.2f}"
+                  f" + raised {r['fp_far_raised_under_rule']:.2f} + over {r['fp_far_over_rule']:.2f}."
+                  f" Missed object within {args.boundary_px}"
                   f" px: {r['fn_near']:.2f}, at table level {r['fn_near_table_level']:.2f}")
         return 0
 

@@ -45,6 +45,8 @@ def test_a_raised_rim_and_a_table_level_rim_are_told_apart(tmp_path):
     assert r["fp_near_table_level"] == pytest.approx(100 * 22 / union)
     assert r["fp_near_over_rule"] == 0.0 and r["fp_far"] == pytest.approx(100 / union)
     assert r["fp_near"] == pytest.approx(r["fp_near_table_level"] + r["fp_near_raised_under_rule"])
+    # the far speck lies on the flat table, so all of the far share is at table level
+    assert r["fp_far_table_level"] == r["fp_far"] and r["fp_far_raised_under_rule"] == r["fp_far_over_rule"] == 0.0
     # of the missed row only the corner beside the table-level rim reads table level through the median
     assert r["fn_near"] == pytest.approx(100 * 20 / union) and r["fn_near_table_level"] == pytest.approx(100 / union)
 
