@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""How high above the table are a model's false-object pixels near object outlines?
+"""How high above the table are a model's false-object pixels, near object outlines and away from them?
 
 Why: issue 9 read the false-object pixels within 2 px of true outlines on real and BlenSor
 frames as a "halo" the model learned from the simulator's edge blur. A halo of blur lies at

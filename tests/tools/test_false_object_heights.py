@@ -1,4 +1,4 @@
-"""tools/false_object_heights.py: false-object pixels near outlines split by height above the table."""
+"""tools/false_object_heights.py: false-object pixels near and away from outlines, split by height above the table."""
 
 from __future__ import annotations
 
