@@ -110,12 +110,12 @@ class Dist:
         local_sum, local_n = (pix * mask).sum(), mask.sum()
         jac = soft_jaccard(logits, target, mask).sum() if jaccard > 0 else None
         wmask = mask * (1.0 + boundary * boundary_band(target)) if boundary > 0 else None
+        w_sum = None if wmask is None else (pix * wmask).sum()
         if not self.enabled:
             bce = local_sum / local_n.clamp_min(1.0)
-            main = bce if wmask is None else (pix * wmask).sum() / wmask.sum().clamp_min(1.0)
+            main = bce if w_sum is None else w_sum / wmask.sum().clamp_min(1.0)
             loss = main if jac is None else main + jaccard * jac / max(logits.shape[0], 1)
             return loss, float(bce.detach())
-        w_sum = None if wmask is None else (pix * wmask).sum()
         s = self.all_sum([float(local_sum.detach()), float(local_n), float(logits.shape[0]),
                           0.0 if wmask is None else float(wmask.sum())])
         n = max(s[1], 1.0)
