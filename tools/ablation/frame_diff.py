@@ -6,7 +6,7 @@ Why: the choice rule compares means over frames, and a frame with no object pixe
 300-frame set one such frame moves the mean by 0.33 points, so a set's difference can be a few
 empty frames rather than a shift of the whole set (trays between two seeds of v20's recipe,
 BENCHMARKS.md "v20's recipe with `--seed 1`, results"). This splits the difference into the
-frames without object pixels and the rest, and lists the frames that moved most.
+frames without object pixels and the rest, and lists the frames that fell most.
 
     .venv/bin/python tools/ablation/frame_diff.py data/test_tray edge/models/default.onnx runs/v20s1/model.onnx
 """
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("data", help="labelled recording (file or folder)")
     ap.add_argument("old", help="the reference model (ONNX)")
     ap.add_argument("new", help="the model compared with it (ONNX)")
-    ap.add_argument("--top", type=int, default=8, help="how many of the most-changed frames to list (default 8)")
+    ap.add_argument("--top", type=int, default=8, help="list up to this many frames whose IoU fell most (default 8)")
     args = ap.parse_args(argv)
     try:
         idx, ious, empty = per_frame(args.data, [Segmenter(args.old), Segmenter(args.new)])
