@@ -82,7 +82,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "model's errors sit (e.g. 2; default 0 = every pixel alike)")
     t.add_argument("--patience", type=int, default=10, help="stop after this many epochs without a better val loss")
     t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
-    t.add_argument("--no-augment", action="store_true", help="disable flips")
+    t.add_argument("--no-augment", action="store_true", help="disable flips (and --crop)")
+    t.add_argument("--crop", metavar="HxW",
+                   help="train on a random HxW window of each frame after its flips, e.g. 128x160 (~2.5x faster "
+                   "steps on 2 cores; standardisation and cues still see the whole frame; validation uses whole "
+                   "frames); default: whole frames")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
                    "under torchrun give each process its share of the cores)")
@@ -134,6 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         require("train", ("torch", "matplotlib"), "training")
         from edge.meta import ModelMeta
         from edge.train.data import (
+            check_crop,
             data_identity,
             load_frames,
             prepare_frames,
@@ -157,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
             ema=args.ema, jaccard=args.jaccard, boundary=args.boundary_weight, memory_format=args.memory_format,
-            precision=args.precision,
+            precision=args.precision, crop=_parse_crop(args.crop),
         )
         from edge.train.encoders import list_encoders
 
@@ -187,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 sources = [(load_frames(args.train_dir, limit=args.limit, progress=bar, **topics), None),
                            (load_frames(args.val_dir, progress=bar, **topics), None)]
+        if cfg.crop is not None:  # before minutes of preprocessing
+            check_crop(cfg.crop, tuple(sources[0][0].depth.shape[1:]))
         total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
         # Under torchrun every rank prepares the whole set: the check counts this machine's ranks,
         # runs once all of them have loaded, and any rank short of memory moves all to per-batch.
@@ -253,6 +260,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     return run(PROG, body, parser)
+
+
+def _parse_crop(text: str | None) -> tuple[int, int] | None:
+    """``--crop HxW`` as (height, width); None when not given."""
+    if text is None:
+        return None
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(v.strip().isdigit() and int(v) >= 1 for v in parts):
+        raise ConfigError(f"--crop must be HEIGHTxWIDTH in pixels, e.g. 128x160; got '{text}'")
+    return int(parts[0]), int(parts[1])
 
 
 if __name__ == "__main__":
