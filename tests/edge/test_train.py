@@ -109,6 +109,10 @@ def test_split_is_deterministic_and_disjoint() -> None:
         (["--data", "x", "--out", "OUT", "--jaccard", "nan"], "jaccard weight"),
         (["--data", "x", "--out", "OUT", "--boundary-weight", "-1"], "boundary weight"),
         (["--data", "x", "--out", "OUT", "--boundary-weight", "inf"], "boundary weight"),
+        (["--data", "x", "--out", "OUT", "--crop", "32"], "--crop must be HEIGHTxWIDTH"),
+        (["--data", "x", "--out", "OUT", "--crop", "0x32"], "--crop must be HEIGHTxWIDTH"),
+        (["--data", "x", "--out", "OUT", "--crop", "64x32"], "crop 64x32 is larger than the frames (40x56)"),
+        (["--data", "x", "--out", "OUT", "--crop", "32x32", "--no-augment"], "crop window is a random augmentation"),
     ],
 )
 def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) -> None:
@@ -451,3 +455,64 @@ def test_available_memory_is_read_from_meminfo_where_there_is_one() -> None:
         assert got is not None and got > 0
     else:
         assert got is None
+
+
+def _windows_of(full: np.ndarray, crop: tuple[int, int]):
+    """Every (flip, top, left) window of a [C, H, W] array: what a cropped item may be."""
+    for f in (full, full[:, :, ::-1], full[:, ::-1, :], full[:, ::-1, ::-1]):
+        for top in range(f.shape[1] - crop[0] + 1):
+            for left in range(f.shape[2] - crop[1] + 1):
+                yield f[:, top : top + crop[0], left : left + crop[1]]
+
+
+def test_a_crop_is_a_window_of_the_frame_preprocessed_whole() -> None:
+    fs = _frames(4, seed=5)
+    idx = np.arange(4)
+    ps = prepare_frames(fs, HEIGHT_META)
+    x, t, m = make_batch(ps, idx, HEIGHT_META, np.random.default_rng(3), crop=(32, 32))
+    assert x.shape == (4, 4, 32, 32) and t.shape == m.shape == (4, 1, 32, 32)  # a multiple of 32: no padding
+    x0, t0, m0 = make_batch(ps, idx, HEIGHT_META)  # whole, unflipped frames, preprocessed whole
+    for b in range(4):
+        got = np.concatenate([x[b], t[b], m[b]])
+        full = np.concatenate([x0[b, :, :40, :56], t0[b, :, :40, :56], m0[b, :, :40, :56]])
+        assert any(np.array_equal(got, w) for w in _windows_of(full, (32, 32)))
+    assert np.array_equal(x[:, 0], x[:, 2])  # depth still replicated
+    # per-batch preprocessing (of the flipped raw frame) cuts the same windows with the same draws
+    _, t_raw, m_raw = make_batch(fs, idx, HEIGHT_META, np.random.default_rng(3), crop=(32, 32))
+    assert np.array_equal(t_raw, t) and np.array_equal(m_raw, m)
+
+
+def test_crop_windows_reach_every_border_in_about_a_quarter_of_the_draws() -> None:
+    from edge.train.data import _draw_window
+
+    rng = np.random.default_rng(0)
+    corners = np.array([_draw_window(rng, (171, 224), (128, 160)) for _ in range(4000)])
+    assert corners.min(axis=0).tolist() == [0, 0] and corners.max(axis=0).tolist() == [43, 64]
+    for share in ((corners[:, 0] == 0).mean(), (corners[:, 0] == 43).mean(),
+                  (corners[:, 1] == 0).mean(), (corners[:, 1] == 64).mean()):
+        assert 0.2 < share < 0.3  # uniform corners would give ~1/44 and ~1/65
+    inner = corners[:, 0][(corners[:, 0] > 0) & (corners[:, 0] < 43)]
+    counts = np.bincount(inner, minlength=43)[1:]
+    assert counts.min() > 0.4 * counts.mean()  # the positions between stay equally likely
+
+
+def test_a_crop_without_random_draws_or_larger_than_the_frame_is_refused() -> None:
+    fs = _frames(2)
+    with pytest.raises(DataError, match="rng"):
+        make_batch(fs, np.array([0]), META, crop=(32, 32))
+    with pytest.raises(DataError, match="larger than the frames"):
+        make_batch(fs, np.array([0]), META, np.random.default_rng(0), crop=(48, 32))
+    with pytest.raises(ConfigError, match="crop must be"):
+        TrainConfig(crop=(0, 32))
+    with pytest.raises(ConfigError, match="random augmentation"):
+        TrainConfig(crop=(32, 32), augment=False)
+
+
+def test_training_on_crops_learns_and_records_the_window(tmp_path) -> None:
+    fs = _frames(32)
+    tr, va = fs.subset(np.arange(24)), fs.subset(np.arange(24, 32))
+    res = train(META, tr, va, tmp_path, TrainConfig(epochs=4, batch_size=8, lr=3e-3, seed=0, threads=1,
+                                                     crop=(32, 32)))
+    losses = [h["val_loss"] for h in res.history]  # of whole validation frames
+    assert losses[-1] < losses[0]
+    assert read_checkpoint(tmp_path / "best.pt")["meta"]["training"]["config"]["crop"] in ([32, 32], (32, 32))
