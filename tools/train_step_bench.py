@@ -10,10 +10,12 @@ in alternating blocks, and with ``--precision bf16`` (bfloat16 autocast of the f
 channels-last), so machine drift hits all alike, and prints ms per training frame, each variant's
 ratio to the first, and how far the losses are apart after the same steps (the two float32
 layouts are the same arithmetic in another order and agree to float rounding; bf16 agrees to
-~0.1 %).
+~0.1 %). ``--crops HxW ...`` adds channels-last float32 variants that step on random windows of the
+frames, as ``depthseg-train --crop`` does (a step costs about what its pixels cost).
 
     .venv/bin/python tools/train_step_bench.py [--data data/val4] [--model edge/models/default.pt]
         [--steps 40] [--block 5] [--batch-size 16] [--threads 2] [--variants channels_last contiguous bf16]
+        [--crops 128x160 160x192]
 
 Without --data (or when it is missing) the frames are the benchmark's seeded synthetic ones.
 """
@@ -51,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS),
                    help="what to time, in this order; the first is the reference of the ratio column "
                    "(default: all: %(default)s)")
+    p.add_argument("--crops", nargs="+", default=[], metavar="HxW",
+                   help="also time channels-last float32 steps on random HxW windows (depthseg-train --crop), "
+                   "named cropHxW, after the variants")
     args = p.parse_args(argv)
 
     import torch
@@ -60,6 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     from edge.train.distributed import Dist
     from edge.train.loop import MEMORY_FORMATS, TrainConfig
     from edge.train.model import build_model
+    from edge.train_cli import _parse_crop
 
     torch.set_num_threads(args.threads)
     meta = checkpoint_meta(args.model, read_checkpoint(args.model))
@@ -76,18 +82,29 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(args.seed)
     total = args.warmup + args.steps
     batches = [rng.choice(len(fs), args.batch_size, replace=len(fs) < args.batch_size) for _ in range(total)]
+    from edge.errors import DepthsegError
+    from edge.train.data import check_crop
+
+    try:
+        crops = {f"crop{c.lower()}": _parse_crop(c) for c in args.crops}
+        for c in crops.values():
+            check_crop(c, tuple(fs.label.shape[1:]))
+    except DepthsegError as exc:
+        print(f"train_step_bench: {exc}", file=sys.stderr)
+        return 2
     runs = {}
-    for name in dict.fromkeys(args.variants):
-        mf, precision = VARIANTS[name]
+    for name in dict.fromkeys(list(args.variants) + list(crops)):
+        mf, precision = VARIANTS.get(name, VARIANTS["channels_last"])
         fmt = MEMORY_FORMATS[mf]
         torch.manual_seed(args.seed)
         model = build_model(meta).to(memory_format=fmt).train()
         runs[name] = {"fmt": fmt, "model": model, "opt": torch.optim.Adam(model.parameters(), lr=1e-3),
                       "autocast": TrainConfig(memory_format=mf, precision=precision).autocast,
-                      "precision": precision, "times": [], "loss": float("nan"), "done": 0}
+                      "precision": precision, "times": [], "loss": float("nan"), "done": 0,
+                      "crop": crops.get(name)}
 
     def step(r: dict, k: int) -> None:
-        x, t, m = dist.local(make_batch(fs, batches[k], meta, np.random.default_rng([args.seed, k])))
+        x, t, m = dist.local(make_batch(fs, batches[k], meta, np.random.default_rng([args.seed, k]), crop=r["crop"]))
         t0 = time.perf_counter()
         with r["autocast"]():
             logits = r["model"](x.contiguous(memory_format=r["fmt"]))
@@ -116,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
         first = first or float(np.median(a))
         print(f"{name:<14} {np.median(a):>12.2f} {a.mean():>7.2f} {a.min():>7.2f} {np.median(a) / first:>8.2f} "
               f"{r['loss']:>10.5f}")
-    fp32 = [r["loss"] for r in runs.values() if r["precision"] == "fp32"]
+    fp32 = [r["loss"] for r in runs.values() if r["precision"] == "fp32" and r["crop"] is None]
     if len(fp32) == 2:
         print(f"loss after {total} identical steps differs by {abs(fp32[0] - fp32[1]):.2e} between the layouts "
               "(float rounding)")

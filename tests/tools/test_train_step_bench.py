@@ -32,3 +32,17 @@ def test_the_variants_chosen_are_the_ones_timed(tmp_path, capsys):
     assert [r[0] for r in rows] == ["bf16", "channels_last"]
     assert rows[0][4] == "1.00"
     assert "between the layouts" not in out  # one float32 variant: no layout pair to compare
+
+
+def test_crop_variants_step_on_windows_and_bad_windows_are_one_line(tmp_path, capsys):
+    mod = load_tool("train_step_bench.py")
+    base = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "1", "--warmup", "0",
+            "--block", "1", "--batch-size", "2", "--threads", "1", "--variants", "channels_last"]
+    assert mod.main(base + ["--crops", "64x96"]) == 0
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.startswith(("channels_last", "crop"))]
+    assert [r[0] for r in rows] == ["channels_last", "crop64x96"]
+    assert float(rows[1][4]) > 0  # timed, with its ratio to the whole frames
+    assert mod.main(base + ["--crops", "999x96"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "larger than the frames" in err and "Traceback" not in err
