@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                 sources = [(load_frames(args.train_dir, limit=args.limit, progress=bar, **topics), None),
                            (load_frames(args.val_dir, progress=bar, **topics), None)]
         if cfg.crop is not None:  # before minutes of preprocessing
-            check_crop(cfg.crop, tuple(sources[0][0].depth.shape[1:]))
+            check_crop(cfg.crop, tuple(sources[0][0].depth.shape[1:]), meta.pad_multiple)
         total = sum(len(fs) if idx is None else len(idx) for fs, idx in sources)
         # Under torchrun every rank prepares the whole set: the check counts this machine's ranks,
         # runs once all of them have loaded, and any rank short of memory moves all to per-batch.

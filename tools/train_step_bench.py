@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         crops = {f"crop{c.lower()}": _parse_crop(c) for c in args.crops}
         for c in crops.values():
-            check_crop(c, tuple(fs.label.shape[1:]))
+            check_crop(c, tuple(fs.label.shape[1:]), meta.pad_multiple)
     except DepthsegError as exc:
         print(f"train_step_bench: {exc}", file=sys.stderr)
         return 2

@@ -5,7 +5,7 @@ the machine has, and decoding MCAP every epoch would cost more than the CPU forw
 Preprocessing runs through `edge.preprocess` (the one implementation), so what the network sees
 in training is what it sees in eval, export and replay: either per batch from the raw frames
 (`FrameSet`), or once per frame before the first epoch (`prepare_frames` -> `PreparedSet`), after
-which `make_batch` only flips, crops (optionally) and pads.
+which `make_batch` only flips, pads and (optionally) crops.
 """
 
 from __future__ import annotations
@@ -311,14 +311,17 @@ def make_batch(
     vertical flip (together: a 180-degree rotation). A 90-degree rotation would change
     171 x 224 into 224 x 171, which the sensor never produces, so it is not used.
 
-    ``crop`` (optional, with ``rng``): a random window of each frame after its flips, cut from
-    the preprocessed channels, so standardisation and the height cue's plane fit still see the
-    whole frame, as they do at inference. Why: a training step costs about what its pixels cost
-    (a 128 x 160 window steps 2.5x faster than the padded 192 x 224 frame on the 2-core AMD
-    EPYC), and the retraining recipe has a 60-minute budget (issue 9). The window's corner is
-    drawn so that each border of the frame is in a quarter of the windows (`_draw_window`):
-    uniform corners would show the frame's outer rows and columns (the dead corners, objects cut
-    by the border) in ~2 % of the windows.
+    ``crop`` (optional, with ``rng``): a random window of each frame as the network sees it
+    (after its flips, preprocessed whole and padded), so standardisation and the height cue's plane
+    fit still see the whole frame, and the zero band that pads 171 rows to 192 at inference is in
+    the windows at the bottom. Why: a training step costs about what its pixels cost (a 128 x 160
+    window steps 2.5x faster than the padded 192 x 224 frame on the 2-core AMD EPYC), and the
+    retraining recipe has a 60-minute budget (issue 9). Why the padded frame: windows of the
+    unpadded frame never show that band, and a model trained so erred 3x as often on the frame's
+    last 16 rows as in its middle (BENCHMARKS.md "candidate C"). The window's corner is drawn so
+    that each border of the padded frame is in a quarter of the windows (`_draw_window`): uniform
+    corners would show the outer rows and columns (the dead corners, objects cut by the border,
+    the padding) in ~2 % of the windows.
 
     Args:
         fs: raw frames (preprocessed here) or a `PreparedSet` made for the same input.
@@ -330,7 +333,10 @@ def make_batch(
     """
     if crop is not None and rng is None:
         raise DataError("a crop window is drawn at random: give make_batch an rng with crop")
+    if crop is not None:
+        check_crop(crop, tuple(fs.label.shape[1:]), meta.pad_multiple)
     items = []  # per frame: (stored channels [1 + cues, H, W], label, valid), flipped
+    corners: list[tuple[int, int]] = []  # with crop: each frame's window (top, left) in the padded frame
     if isinstance(fs, PreparedSet):
         if fs.options != input_options(meta):
             raise DataError(
@@ -343,7 +349,7 @@ def make_batch(
             items.append((_flipped(fs.channels[i], lr, ud), _flipped(fs.label[i], lr, ud),
                           _flipped(fs.valid[i], lr, ud)))
             if crop is not None:
-                items[-1] = _windowed(items[-1], _draw_window(rng, (h, w), crop), crop)
+                corners.append(_draw_window(rng, (h, w), padded_shape(h, w, meta.pad_multiple), crop))
     else:
         h, w = fs.label.shape[1:]
         for i in idx:
@@ -351,14 +357,31 @@ def make_batch(
             p = preprocess_for(_flipped(fs.depth[i], lr, ud), meta)
             items.append((_frame_channels(p, meta, h, w), _flipped(fs.label[i], lr, ud), p.valid))
             if crop is not None:
-                items[-1] = _windowed(items[-1], _draw_window(rng, (h, w), crop), crop)
-    if crop is not None:
-        h, w = crop
-    return _assemble(items, meta, h, w)
+                corners.append(_draw_window(rng, (h, w), padded_shape(h, w, meta.pad_multiple), crop))
+    batch = _assemble(items, meta, h, w)
+    if crop is None:
+        return batch
+    ch, cw = crop
+    return tuple(  # type: ignore[return-value]
+        np.stack([a[b, :, top : top + ch, left : left + cw] for b, (top, left) in enumerate(corners)])
+        for a in batch
+    )
 
 
-def check_crop(crop: tuple[int, int], frame: tuple[int, int]) -> None:
-    """Raise `DataError` unless a (height, width) window fits the (height, width) frames."""
+def check_crop(crop: tuple[int, int], frame: tuple[int, int], multiple: int = 1) -> None:
+    """Raise `DataError` unless a (height, width) window fits the (height, width) frames.
+
+    Args:
+        crop: the window.
+        frame: the frames' unpadded size.
+        multiple: the model's `pad_multiple` (its total stride, 32), which the window's sides must
+            be multiples of, since a window is fed to the network unpadded.
+    """
+    if crop[0] % multiple or crop[1] % multiple:
+        raise DataError(
+            f"crop {crop[0]}x{crop[1]}: height and width must be multiples of {multiple} (the network's stride), "
+            "e.g. 128x160"
+        )
     if crop[0] > frame[0] or crop[1] > frame[1]:
         raise DataError(
             f"crop {crop[0]}x{crop[1]} is larger than the frames ({frame[0]}x{frame[1]}); "
@@ -366,28 +389,22 @@ def check_crop(crop: tuple[int, int], frame: tuple[int, int]) -> None:
         )
 
 
-def _draw_window(rng: np.random.Generator, frame: tuple[int, int], crop: tuple[int, int]) -> tuple[int, int]:
-    """(top, left) of a ``crop`` window in a ``frame``: two draws, top then left.
+def _draw_window(rng: np.random.Generator, frame: tuple[int, int], padded: tuple[int, int],
+                 crop: tuple[int, int]) -> tuple[int, int]:
+    """(top, left) of a ``crop`` window in the ``padded`` frame: two draws, top then left.
 
     Each corner coordinate is drawn uniformly from the slack widened by half of it on both sides
-    and clipped back, so the window touches each border of the frame in ~1/4 of the draws (a
-    border row of a 171-row frame is seen in ~26 % of 128-row windows instead of ~2 %) and every
-    other position stays equally likely.
+    and clipped back, so the window touches each border of the padded frame in ~1/4 of the draws
+    (the frame's top row is in ~26 % of 128-row windows instead of ~2 %) and every position
+    between stays equally likely; a window never starts below the ``frame``'s last row or right
+    of its last column, so it always holds some of the frame.
     """
-    check_crop(crop, frame)
     out = []
-    for size, c in zip(frame, crop):
-        slack = size - c
+    for size, pad, c in zip(frame, padded, crop):
+        slack = pad - c
         half = slack // 2
-        out.append(int(np.clip(rng.integers(-half, slack + half + 1), 0, slack)))
+        out.append(min(int(np.clip(rng.integers(-half, slack + half + 1), 0, slack)), size - 1))
     return out[0], out[1]
-
-
-def _windowed(item: tuple[np.ndarray, np.ndarray, np.ndarray], corner: tuple[int, int],
-              crop: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (channels, label, valid) of one frame cut to the window at ``corner``."""
-    (top, left), (ch, cw) = corner, crop
-    return tuple(a[..., top : top + ch, left : left + cw] for a in item)  # type: ignore[return-value]
 
 
 def _draw_flips(rng: np.random.Generator | None) -> tuple[bool, bool]:

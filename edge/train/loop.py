@@ -262,7 +262,7 @@ def train(
 ) -> TrainResult:
     out = Path(out_dir)
     if cfg.crop is not None:
-        check_crop(cfg.crop, tuple(train_set.label.shape[1:]))  # before any work: a clear error, nothing written
+        check_crop(cfg.crop, tuple(train_set.label.shape[1:]), meta.pad_multiple)  # before any work: a clear error, nothing written
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
