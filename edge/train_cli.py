@@ -87,6 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="train on a random HxW window of each frame after its flips, e.g. 128x160 (~2.5x faster "
                    "steps on 2 cores; standardisation and cues still see the whole frame; validation uses whole "
                    "frames); default: whole frames")
+    t.add_argument("--crop-epochs", type=int, metavar="N",
+                   help="with --crop: windows in the first N epochs only, whole frames after, so the last epochs "
+                   "fit the frame as inference sees it (default: windows in every epoch)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2, help="torch intra-op threads per process (default %(default)s; "
                    "under torchrun give each process its share of the cores)")
@@ -162,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
             ema=args.ema, jaccard=args.jaccard, boundary=args.boundary_weight, memory_format=args.memory_format,
-            precision=args.precision, crop=_parse_crop(args.crop),
+            precision=args.precision, crop=_parse_crop(args.crop), crop_epochs=args.crop_epochs,
         )
         from edge.train.encoders import list_encoders
 

@@ -31,7 +31,11 @@ Differences from the paper, and why:
   costs about what its pixels cost, so a 128 x 160 window makes steps ~2.5x faster on the 2-core
   AMD EPYC (the retraining recipe has a 60-minute budget, issue 9), and a fully convolutional
   network applies the same filters to a window as to the frame. Standardisation and the height
-  cue are computed on the whole frame before the cut, as at inference.
+  cue are computed on the whole frame before the cut, as at inference. ``crop_epochs`` N: windows
+  in the first N epochs only, whole frames after (progressive resizing; a model trained on
+  windows throughout lost most where the frame's layout tells, at table edges, curved supports and
+  trays: BENCHMARKS.md "candidate C2, results"), so the last epochs fit whole frames as inference
+  sees them (Touvron et al. 2019, "Fixing the train-test resolution discrepancy").
 - ``precision`` "bf16" (optional; "fp32" the default): the training forward pass runs under
   bfloat16 autocast on the CPU; weights, the optimizer, the weight average, the loss, validation
   and checkpoints stay float32. Why: on CPUs with AMX (Intel Sapphire Rapids and later) it makes a
@@ -90,6 +94,7 @@ class TrainConfig:
     memory_format: str = "channels_last"  # "channels_last" (NHWC, faster on CPU) or "contiguous" (NCHW)
     precision: str = "fp32"  # of the training forward pass: "fp32" or "bf16" (autocast; faster with AMX)
     crop: tuple[int, int] | None = None  # (height, width) random training window; None = whole frames
+    crop_epochs: int | None = None  # with crop: windows in the first N epochs only, whole frames after; None = all
 
     def __post_init__(self) -> None:
         if self.epochs < 1:
@@ -117,6 +122,11 @@ class TrainConfig:
                 raise ConfigError(f"crop must be (height, width) in whole pixels >= 1, e.g. (128, 160); got {self.crop}")
             if not self.augment:
                 raise ConfigError("a crop window is a random augmentation: train with augmentation or without a crop")
+        if self.crop_epochs is not None:
+            if self.crop is None:
+                raise ConfigError("crop epochs count the epochs on windows: give a crop too, e.g. (128, 160)")
+            if isinstance(self.crop_epochs, bool) or not isinstance(self.crop_epochs, int) or self.crop_epochs < 0:
+                raise ConfigError(f"crop epochs must be a whole number >= 0, got {self.crop_epochs}")
 
     def autocast(self, device_type: str = "cpu") -> torch.autocast:
         """The context of a training forward pass: bfloat16 autocast for "bf16", else a no-op.
@@ -345,11 +355,12 @@ def train(
             g["lr"] = lr_at(i)
         rng = np.random.default_rng([cfg.seed, i])
         order = rng.permutation(len(train_set))
+        crop = cfg.crop if cfg.crop_epochs is None or i < cfg.crop_epochs else None
         model.train()
         run_loss = 0.0
         for b in range(steps_per_epoch):
             idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-            x, t, m = dist.local(make_batch(train_set, idx, meta, rng if cfg.augment else None, crop=cfg.crop))
+            x, t, m = dist.local(make_batch(train_set, idx, meta, rng if cfg.augment else None, crop=crop))
             with cfg.autocast(dist.device.type):
                 logits = net(x.contiguous(memory_format=fmt))
             loss, lv = dist.loss(logits.float(), t, m, cfg.jaccard, cfg.boundary)  # in float32 whatever the forward

@@ -114,6 +114,8 @@ def test_split_is_deterministic_and_disjoint() -> None:
         (["--data", "x", "--out", "OUT", "--crop", "64x32"], "crop 64x32 is larger than the frames (40x56)"),
         (["--data", "x", "--out", "OUT", "--crop", "32x40"], "must be multiples of 32"),
         (["--data", "x", "--out", "OUT", "--crop", "32x32", "--no-augment"], "crop window is a random augmentation"),
+        (["--data", "x", "--out", "OUT", "--crop-epochs", "2"], "give a crop too"),
+        (["--data", "x", "--out", "OUT", "--crop", "32x32", "--crop-epochs", "-1"], "crop epochs must be"),
     ],
 )
 def test_cli_bad_input_is_one_line(argv, needle, tmp_path, capsys, monkeypatch) -> None:
@@ -526,3 +528,22 @@ def test_training_on_crops_learns_and_records_the_window(tmp_path) -> None:
     losses = [h["val_loss"] for h in res.history]  # of whole validation frames
     assert min(losses[1:]) < 0.8 * losses[0]
     assert read_checkpoint(tmp_path / "best.pt")["meta"]["training"]["config"]["crop"] in ([32, 32], (32, 32))
+
+
+def test_crop_epochs_train_on_windows_first_and_whole_frames_after(tmp_path, monkeypatch) -> None:
+    import edge.train.loop as loop
+
+    seen = []
+    real = loop.make_batch
+
+    def spy(fs, idx, meta, rng=None, crop=None):
+        x, t, m = real(fs, idx, meta, rng, crop=crop)
+        if rng is not None:  # a training batch (validation draws nothing)
+            seen.append(x.shape[-2:])
+        return x, t, m
+
+    monkeypatch.setattr(loop, "make_batch", spy)
+    fs = _frames(16)
+    train(META, fs.subset(np.arange(8)), fs.subset(np.arange(8, 16)), tmp_path,
+          TrainConfig(epochs=3, batch_size=8, seed=0, threads=1, crop=(32, 32), crop_epochs=2))
+    assert seen == [(32, 32), (32, 32), (64, 64)]  # one batch an epoch: two on windows, then the padded frame
