@@ -84,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--max-minutes", type=float, help="stop before this wall-clock budget would be exceeded")
     t.add_argument("--no-augment", action="store_true", help="disable flips (and --crop)")
     t.add_argument("--crop", metavar="HxW",
-                   help="train on a random HxW window of each frame after its flips, e.g. 128x160 (~2.5x faster "
+                   help="train on a random HxW window of each frame after its flips, e.g. 128x160 (~2.2x faster "
                    "steps on 2 cores; standardisation and cues still see the whole frame; validation uses whole "
                    "frames); default: whole frames")
     t.add_argument("--crop-epochs", type=int, metavar="N",

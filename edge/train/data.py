@@ -315,7 +315,7 @@ def make_batch(
     (after its flips, preprocessed whole and padded), so standardisation and the height cue's plane
     fit still see the whole frame, and the zero band that pads 171 rows to 192 at inference is in
     the windows at the bottom. Why: a training step costs about what its pixels cost (a 128 x 160
-    window steps 2.5x faster than the padded 192 x 224 frame on the 2-core AMD EPYC), and the
+    window steps ~2.2x faster than the padded 192 x 224 frame on the 2-core AMD EPYC), and the
     retraining recipe has a 60-minute budget (issue 9). Why the padded frame: windows of the
     unpadded frame never show that band, and a model trained so erred 3x as often on the frame's
     last 16 rows as in its middle (BENCHMARKS.md "candidate C"). The window's corner is drawn so

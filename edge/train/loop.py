@@ -28,7 +28,7 @@ Differences from the paper, and why:
   Checkpoints are written contiguous either way, so nothing downstream sees the difference.
 - ``crop`` (optional): each training frame is cut to a random (height, width) window after its
   flips (`edge.train.data.make_batch`); validation and inference see whole frames. Why: a step
-  costs about what its pixels cost, so a 128 x 160 window makes steps ~2.5x faster on the 2-core
+  costs about what its pixels cost, so a 128 x 160 window makes steps ~2.2x faster on the 2-core
   AMD EPYC (the retraining recipe has a 60-minute budget, issue 9), and a fully convolutional
   network applies the same filters to a window as to the frame. Standardisation and the height
   cue are computed on the whole frame before the cut, as at inference. ``crop_epochs`` N: windows
