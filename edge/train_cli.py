@@ -144,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
             check_crop,
             data_identity,
             load_frames,
+            parse_crop,
             prepare_frames,
             preprocess_mode,
             split_indices,
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
             patience=args.patience, seed=args.seed, threads=args.threads, augment=not args.no_augment,
             max_minutes=args.max_minutes, freeze_encoder=args.freeze_encoder, encoder_weights=args.encoder_weights,
             ema=args.ema, jaccard=args.jaccard, boundary=args.boundary_weight, memory_format=args.memory_format,
-            precision=args.precision, crop=_parse_crop(args.crop), crop_epochs=args.crop_epochs,
+            precision=args.precision, crop=parse_crop(args.crop), crop_epochs=args.crop_epochs,
         )
         from edge.train.encoders import list_encoders
 
@@ -263,16 +264,6 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     return run(PROG, body, parser)
-
-
-def _parse_crop(text: str | None) -> tuple[int, int] | None:
-    """``--crop HxW`` as (height, width); None when not given."""
-    if text is None:
-        return None
-    parts = text.lower().split("x")
-    if len(parts) != 2 or not all(v.strip().isdigit() and int(v) >= 1 for v in parts):
-        raise ConfigError(f"--crop must be HEIGHTxWIDTH in pixels, e.g. 128x160; got '{text}'")
-    return int(parts[0]), int(parts[1])
 
 
 if __name__ == "__main__":

@@ -65,7 +65,6 @@ def main(argv: list[str] | None = None) -> int:
     from edge.train.distributed import Dist
     from edge.train.loop import MEMORY_FORMATS, TrainConfig
     from edge.train.model import build_model
-    from edge.train_cli import _parse_crop
 
     torch.set_num_threads(args.threads)
     meta = checkpoint_meta(args.model, read_checkpoint(args.model))
@@ -83,10 +82,10 @@ def main(argv: list[str] | None = None) -> int:
     total = args.warmup + args.steps
     batches = [rng.choice(len(fs), args.batch_size, replace=len(fs) < args.batch_size) for _ in range(total)]
     from edge.errors import DepthsegError
-    from edge.train.data import check_crop
+    from edge.train.data import check_crop, parse_crop
 
     try:
-        crops = {f"crop{c.lower()}": _parse_crop(c) for c in args.crops}
+        crops = {f"crop{c.lower()}": parse_crop(c) for c in args.crops}
         for c in crops.values():
             check_crop(c, tuple(fs.label.shape[1:]), meta.pad_multiple)
     except DepthsegError as exc:

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from edge.errors import DataError
+from edge.errors import ConfigError, DataError
 from edge.io.reader import DEFAULT_TOLERANCE_NS, open_frames
 from edge.meta import ModelMeta
 from edge.preprocess import input_options, padded_shape, preprocess_for
 
 __all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes", "preprocess_mode", "RESERVE_BYTES",
-           "available_memory_bytes", "split_indices", "make_batch", "check_crop", "data_identity"]
+           "available_memory_bytes", "split_indices", "make_batch", "parse_crop", "check_crop", "data_identity"]
 
 PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
 MANIFEST_KEYS = ("tool", "seed", "frames", "config_digest", "engines", "provenance")  # what names a simulated set
@@ -329,7 +329,8 @@ def make_batch(
         meta: the model whose input is made.
         rng: draws the flips (two draws per frame, in order), then, with ``crop``, the window's
             top and left; None = no augmentation.
-        crop: (height, width) of the window, at most the frame's; None = whole frames. Needs ``rng``.
+        crop: (height, width) of the window, at most the frame's, sides multiples of
+            ``meta.pad_multiple``; None = whole frames. Needs ``rng``.
     """
     if crop is not None and rng is None:
         raise DataError("a crop window is drawn at random: give make_batch an rng with crop")
@@ -366,6 +367,20 @@ def make_batch(
         np.stack([a[b, :, top : top + ch, left : left + cw] for b, (top, left) in enumerate(corners)])
         for a in batch
     )
+
+
+def parse_crop(text: str | None) -> tuple[int, int] | None:
+    """``--crop HxW`` (e.g. "128x160") as (height, width); None when ``text`` is None.
+
+    Args:
+        text: the option's value as typed.
+    """
+    if text is None:
+        return None
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(v.strip().isdigit() and int(v) >= 1 for v in parts):
+        raise ConfigError(f"--crop must be HEIGHTxWIDTH in pixels, e.g. 128x160; got '{text}'")
+    return int(parts[0]), int(parts[1])
 
 
 def check_crop(crop: tuple[int, int], frame: tuple[int, int], multiple: int = 1) -> None:
