@@ -313,6 +313,10 @@ class SceneConfig:
     tray_inner_m: tuple[float, float] = (0.14, 0.24)  # inner side lengths (each side drawn alone)
     tray_wall_height_m: tuple[float, float] = (0.02, 0.06)
     tray_wall_thickness_m: tuple[float, float] = (0.003, 0.01)
+    # Per scene: no objects at all, whatever n_objects says. Table I's uniform 0-20 leaves ~5 %
+    # of scenes empty, and an empty frame scores 0 with a single false object pixel, so a model
+    # that rarely sees bare trays and table edges paints their rims (BENCHMARKS.md "candidate C6").
+    empty_prob: float = 0.0
     # Camera poses rendered per settled scene (sim.views): frame i shows scene i // V from view i % V.
     # 4: physics paid once per 4 frames (1.7-1.9x the frames/s of one view with 2 workers here) at
     # no held-out accuracy cost (BENCHMARKS.md "Views per scene"); 1 is the paper's one pose a scene.
@@ -387,6 +391,7 @@ class SceneConfig:
         check_range("scene.tray_inner_m", self.tray_inner_m, 0.02, 2.0)
         check_range("scene.tray_wall_height_m", self.tray_wall_height_m, 0.001, 0.5)
         check_range("scene.tray_wall_thickness_m", self.tray_wall_thickness_m, 0.0005, 0.1)
+        check_number("scene.empty_prob", self.empty_prob, 0.0, 1.0)
         reach = max(abs(float(v)) for v in self.object_xy_m)
         if self.table_edge_prob > 0 and self.table_edge_dist_m[0] <= reach:
             raise ConfigError(
@@ -426,6 +431,7 @@ _FAMILY_DEFAULTS = {
         "tray_inner_m": (0.14, 0.24),
         "tray_wall_height_m": (0.02, 0.06),
         "tray_wall_thickness_m": (0.003, 0.01),
+        "empty_prob": 0.0,
         "views_per_scene": 1,
     }.items()
 }
@@ -665,6 +671,8 @@ def sample_scene(rng: np.random.Generator, cfg: SceneConfig, library: MeshLibrar
     its random stream (and its frames) unchanged.
     """
     n = int(rng.integers(int(cfg.n_objects[0]), int(cfg.n_objects[1]) + 1))
+    if cfg.empty_prob > 0 and rng.random() < cfg.empty_prob:
+        n = 0
     n_thin = int(rng.binomial(n, cfg.thin_fraction)) if cfg.thin_fraction > 0 else 0
     n_long = int(rng.binomial(n - n_thin, cfg.long_fraction)) if cfg.long_fraction > 0 else 0
     objects: list[ObjectSpec] = []

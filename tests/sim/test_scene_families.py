@@ -54,12 +54,26 @@ def test_family_keys_are_off_by_default_and_keep_the_digest():
         ("floor_drop_m", [0.5, 0.2], "above max"),
         ("tray_prob", 2, "scene.tray_prob"),
         ("tray_wall_height_m", [0.0, 0.05], "scene.tray_wall_height_m: min 0.0 is below"),
+        ("empty_prob", 1.2, "scene.empty_prob"),
     ],
 )
 def test_bad_family_values_are_one_line_config_errors(key, value, match):
     with pytest.raises(ConfigError, match=match) as exc:
         SimConfig.from_dict({"scene": {key: value}})
     assert "\n" not in str(exc.value)
+
+
+def test_empty_prob_empties_that_share_of_scenes_and_is_off_by_default():
+    assert "empty_prob" not in SceneConfig().to_dict()
+    assert SimConfig.from_dict({"scene": {"empty_prob": 0.0}}).digest() == SimConfig().digest()
+    cfg = SceneConfig(n_objects=(5, 10), empty_prob=0.25)
+    rng = np.random.default_rng(7)
+    counts = [len(sample_scene(rng, cfg).objects) for _ in range(400)]
+    empty = sum(c == 0 for c in counts) / len(counts)
+    assert 0.18 < empty < 0.32  # 0.25 +- ~4 sigma; n_objects alone never gives 0 here
+    assert all(c == 0 or 5 <= c <= 10 for c in counts)
+    full = SceneConfig(n_objects=(5, 10), empty_prob=1.0)
+    assert not sample_scene(np.random.default_rng(1), full).objects
 
 
 @pytest.mark.parametrize("kind", THIN_KINDS)
