@@ -16,7 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from heldout import HELD_OUT  # noqa: E402  (this folder is on sys.path when run as a script)
+from heldout import HELD_OUT, digest_report  # noqa: E402  (this folder is on sys.path when run as a script)
 
 ROOT = Path(__file__).resolve().parents[2]
 SETS = [("own sim", "data/test_default"), ("crisp edges", "data/test_crisp"), ("blurred edges", "data/test_blurred"),
@@ -66,6 +66,7 @@ def candidates(models: list[str]) -> int:
     print(f"| mean of the first {n} sets but long | " + " | ".join(f"{sum(c[i] for i in old) / len(old):.2f}" for c in cols) + " |")
     for model, col in zip(models[1:], cols[1:]):
         print(verdict(models[0], cols[0][:n], model, col[:n]))
+    print(digest_report())  # whether these are the frames BENCHMARKS.md's tables were scored on
     return 0
 
 
