@@ -13,7 +13,7 @@ from edge.meta import ModelMeta
 from edge.train.checkpoint import load_checkpoint, read_checkpoint
 from edge.train.data import FrameSet, load_frames, make_batch, prepare_frames, prepared_bytes, split_indices
 from edge.train.loop import TrainConfig, train
-from edge.train.losses import boundary_band, masked_bce, soft_jaccard
+from edge.train.losses import boundary_band, boundary_band_by_pooling, masked_bce, soft_jaccard
 from edge.train_cli import main as train_main
 
 META = ModelMeta(encoder="vgg11", width=0.125, batch_norm=True)
@@ -228,6 +228,21 @@ def test_boundary_band_is_two_pixels_either_side_of_an_outline() -> None:
     assert band[5, 0] == 0 and band[5, 5] == 0 and band[6, 6] == 0  # farther: the table, the interior
     assert float(boundary_band(torch.zeros(1, 1, 8, 8)).sum()) == 0  # no object, no band
     assert float(boundary_band(torch.ones(1, 1, 8, 8)).sum()) == 0  # one object filling the frame
+
+
+@pytest.mark.parametrize("px", [1, 2, 3])
+def test_boundary_band_by_box_sums_equals_dilation_minus_erosion(px) -> None:
+    g = torch.Generator().manual_seed(px)
+    blobs = torch.nn.functional.avg_pool2d(torch.rand(4, 1, 37, 53, generator=g), 7, 1, 3)
+    target = (blobs > 0.5).float()  # objects of any shape, cut by every border
+    target[0] = 0  # an empty frame
+    target[1] = 1  # an object filling the frame
+    target[2, :, ::2, ::3] = 1 - target[2, :, ::2, ::3]  # single-pixel speckle
+    band = boundary_band(target, px)
+    assert band.dtype == target.dtype and float(band[2].sum()) > 0
+    assert torch.equal(band, boundary_band_by_pooling(target, px))  # bit for bit
+    soft = target * 0.5  # not 0/1: the max pools are the rule
+    assert torch.equal(boundary_band(soft, px), boundary_band_by_pooling(soft, px))
 
 
 def test_a_wall_clock_budget_stops_early_and_says_so(tmp_path, capsys) -> None:
