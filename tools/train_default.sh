@@ -6,8 +6,10 @@
 #   bash tools/train_default.sh            # v19d's recipe took 54-83 min on a 2-core AMD EPYC, by the day: 54.2 and
 #                                          # 60.7 min on 2026-12-02 (v19, v19c), 83.0 min on 2026-12-03 (v19d, a ~1.5x
 #                                          # slower machine); v20's (this script) 80.3 min from nothing on 2026-12-03,
-#                                          # reproducing the shipped weights bit for bit; BENCHMARKS.md "candidate v19",
-#                                          # "candidate v19d, results", "v20's recipe from nothing, results"
+#                                          # reproducing the shipped weights bit for bit, and 77.9 min on 2026-12-07 (bit
+#                                          # for bit again, with the loss's band by box sums); BENCHMARKS.md "candidate v19",
+#                                          # "candidate v19d, results", "v20's recipe from nothing, results",
+#                                          # "v20's recipe from nothing on 2026-12-07, results"
 #   FRAMES=24000 bash tools/train_default.sh   # the previous default v12's data volume (~52-60 min)
 #
 # 1. simulate 32,000 labelled frames (seed 1; 4 camera views of each of 8,000 settled scenes, which
