@@ -98,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "steps on the CPUs measured; checkpoints are stored in the usual layout either way)")
     t.add_argument("--nchw-bn-channels", type=int, default=0, metavar="N",
                    help="with channels_last: batch norms over at most N channels normalise an NCHW copy of their "
-                   "input (N=8: steps x0.84 as long on a 2-core AMD EPYC; the weights differ from a plain run by "
+                   "input (N=8: steps x0.84-0.89 as long on a 2-core AMD EPYC; the weights differ from a plain run by "
                    "float rounding); default %(default)s = off")
     t.add_argument("--precision", default="fp32", choices=("fp32", "bf16"),
                    help="of the training forward pass (default %(default)s); bf16 = bfloat16 autocast, ~1.4x faster "

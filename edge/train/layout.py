@@ -5,8 +5,8 @@ made the compact models' convolutions 1.4-2.3x faster. PyTorch's CPU batch norm 
 at full resolution: with 4 or 8 channels its channels-last kernel took 1.9-5.5x as long as on the
 same tensor in NCHW (2026-12-07, AMD EPYC, 2 threads, [16, C, 192, 224], forward and backward),
 and the default model's two full-resolution batch norms (the encoder's first, 8 channels; the
-decoder's last, 4) were ~35 % of a training step. Normalising an NCHW copy and handing back a
-channels-last result costs two copies each way and still made a step x0.84 as long
+decoder's last, 4) were ~36 % of a training step. Normalising an NCHW copy and handing back a
+channels-last result costs two copies each way and still made a step x0.84-0.89 as long
 (BENCHMARKS.md "batch norms over few channels in NCHW").
 
 The arithmetic is the same batch norm, but its sums run in another order, so the weights agree

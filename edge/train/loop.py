@@ -44,7 +44,7 @@ Differences from the paper, and why:
 - ``nchw_bn`` N (optional; 0 the default): with channels-last training, the batch norms over at
   most N channels normalise an NCHW copy of their input (`edge.train.layout`). Why: at full
   resolution PyTorch's channels-last CPU batch norm over 4-8 channels was 1.9-5.5x slower than
-  NCHW's, ~35 % of the default model's step; N = 8 made a step x0.84 as long. Float rounding
+  NCHW's, ~36 % of the default model's step; N = 8 made a step x0.84-0.89 as long. Float rounding
   differs from the plain run, so the shipped recipe does not use it yet.
 """
 
