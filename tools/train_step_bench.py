@@ -131,12 +131,15 @@ def main(argv: list[str] | None = None) -> int:
             r["times"].append(time.perf_counter() - t0)
         r["loss"] = lv
 
-    while any(r["done"] < total for r in runs.values()):
-        for r in runs.values():
-            for _ in range(args.block):
-                if r["done"] < total:
-                    step(r, r["done"])
-                    r["done"] += 1
+    try:
+        while any(r["done"] < total for r in runs.values()):
+            for r in runs.values():
+                for _ in range(args.block):
+                    if r["done"] < total:
+                        step(r, r["done"])
+                        r["done"] += 1
+    finally:  # the band is swapped in the module per step; leave it as the library ships it
+        distributed.boundary_band = boundary_band
     print(f"torch {torch.__version__}, {args.threads} threads; {source}; architecture of {args.model} "
           f"({meta.encoder} x{meta.width:g}, {meta.in_channels} ch + cues {list(meta.cues)}); batch {args.batch_size}, "
           f"{args.steps} timed steps per format after {args.warmup} warm-up, alternating blocks of {args.block}; "

@@ -46,3 +46,15 @@ def test_crop_variants_step_on_windows_and_bad_windows_are_one_line(tmp_path, ca
     assert mod.main(base + ["--crops", "992x96"]) == 2
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "larger than the frames" in err and "Traceback" not in err
+
+
+def test_the_pooled_band_variant_leaves_the_library_band_in_place(tmp_path, capsys):
+    import edge.train.distributed as distributed
+    from edge.train.losses import boundary_band
+
+    mod = load_tool("train_step_bench.py")
+    argv = ["--data", str(tmp_path / "absent"), "--frames", "4", "--steps", "1", "--warmup", "0",
+            "--block", "1", "--batch-size", "2", "--threads", "1", "--variants", "channels_last", "pool_band"]
+    assert mod.main(argv) == 0
+    assert "pool_band's loss after the same steps equals channels_last's" in capsys.readouterr().out
+    assert distributed.boundary_band is boundary_band  # a later training in this process uses the box sums
