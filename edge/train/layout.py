@@ -7,7 +7,7 @@ same tensor in NCHW (2026-12-07, AMD EPYC, 2 threads, [16, C, 192, 224], forward
 and the default model's two full-resolution batch norms (the encoder's first, 8 channels; the
 decoder's last, 4) were ~36 % of a training step. Normalising an NCHW copy and handing back a
 channels-last result costs two copies each way and still made a step x0.84-0.89 as long
-(BENCHMARKS.md "batch norms over few channels in NCHW").
+(BENCHMARKS.md "where a training step goes"; a recipe with it: "candidate nb8, results").
 
 The arithmetic is the same batch norm, but its sums run in another order, so the weights agree
 with a plain channels-last run to float rounding, not bit for bit; that is why it is an option
