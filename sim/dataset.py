@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.cliutil import progress
-from edge.errors import ConfigError, DataError, DepthsegError
+from edge.errors import ConfigError, DataError
 from edge.provenance import provenance
 
 __all__ = ["simulate", "shard_name", "iter_shards", "check_size", "usable_cores", "engines", "engine_mismatch",
@@ -129,24 +129,17 @@ _W: dict[str, Any] = {}
 
 
 def _init_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q, pooled: bool = True) -> None:
-    """Set up a worker. In a pool, a failure is kept and raised by the worker's first task.
+    """Set up a worker: its config, mesh library, output folder and progress queue.
 
-    Why: `multiprocessing.Pool` replaces a worker whose initializer raises, forever (a missing
-    open3d would spin the pool and print a traceback per worker); a task that raises instead
-    ends the run with one line.
+    In a pool (`sim.workers`) a missing open3d becomes the one-line error naming the extra,
+    which the parent prints; in this process (``pooled=False``) the import error is the caller's.
     """
-    if not pooled:
-        _setup_worker(config_dict, seed, library_paths, out, q, pooled)
-        return
     try:
         _setup_worker(config_dict, seed, library_paths, out, q, pooled)
-    except DepthsegError as exc:
-        _W["init_error"] = type(exc)(str(exc))
     except ImportError as exc:
-        _W["init_error"] = ConfigError(f"a worker cannot import {exc.name or 'a module'} ({exc}); {SIM_EXTRA}")
-    except Exception as exc:  # noqa: BLE001 - reported by the first task, as one line
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        _W["init_error"] = DataError(f"a worker failed to start ({type(exc).__name__}: {first})")
+        if not pooled:
+            raise
+        raise ConfigError(f"a worker cannot import {exc.name or 'a module'} ({exc}); {SIM_EXTRA}") from None
 
 
 def _setup_worker(config_dict: dict, seed: int, library_paths: list[str] | None, out: str, q, pooled: bool) -> None:
@@ -173,8 +166,6 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
     from edge.io import FrameWriter
     from sim.generate import generate_frame
 
-    if "init_error" in _W:
-        raise _W["init_error"]
     start, stop = task
     t0 = time.perf_counter()
     obj = inv = pix = 0
@@ -443,13 +434,11 @@ def simulate(
                 for task in todo:
                     record(_write_shard(task))
             else:
-                with ctx.Pool(
-                    min(workers, n_plan - len(done)),
-                    initializer=_init_worker,
-                    initargs=(config.to_dict(), seed, library_paths, str(out), q),
-                ) as pool:
-                    for stats in pool.imap_unordered(_write_shard, todo):
-                        record(stats)
+                from sim.workers import run_tasks
+
+                for stats in run_tasks(ctx, workers, _write_shard, todo, initializer=_init_worker,
+                                       initargs=(config.to_dict(), seed, library_paths, str(out), q)):
+                    record(stats)
         finally:
             stop.set()
             th.join(timeout=1.0)

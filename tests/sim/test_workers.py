@@ -1,0 +1,79 @@
+"""`sim.workers.run_tasks`: every result once, the first error as one line, never a hang.
+
+The tasks are stdlib functions (they pickle by name into a spawned worker): `math.sqrt` fails
+on -1, `os._exit` kills its worker, `time.sleep` keeps one busy.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+import signal
+import time
+
+import pytest
+
+from edge.errors import ConfigError, DataError
+from sim import workers
+
+CTX = mp.get_context("spawn")
+
+
+def _no_children_left() -> None:
+    assert not mp.active_children(), "run_tasks left worker processes behind"
+
+
+def test_every_result_comes_back_once():
+    got = sorted(workers.run_tasks(CTX, 2, math.sqrt, [float(i * i) for i in range(20)]))
+    assert got == [float(i) for i in range(20)]
+    _no_children_left()
+
+
+def test_no_tasks_start_no_workers():
+    assert list(workers.run_tasks(CTX, 2, math.sqrt, [])) == []
+    _no_children_left()
+
+
+def test_a_failing_task_ends_the_run_with_one_line():
+    with pytest.raises(DataError, match=r"^a worker failed \(ValueError: math domain error\)$"):
+        list(workers.run_tasks(CTX, 2, math.sqrt, [4.0, -1.0, 9.0, 16.0]))
+    _no_children_left()
+
+
+def test_a_failing_initializer_fails_the_run_instead_of_respawning():
+    t0 = time.monotonic()
+    with pytest.raises(DataError, match="ValueError"):
+        list(workers.run_tasks(CTX, 2, math.sqrt, [1.0, 4.0], initializer=math.sqrt, initargs=(-1.0,)))
+    assert time.monotonic() - t0 < 60
+    _no_children_left()
+
+
+def test_a_worker_that_dies_ends_the_run_instead_of_waiting_forever():
+    t0 = time.monotonic()
+    with pytest.raises(DataError, match="exited with code 3; run the same command again to resume"):
+        list(workers.run_tasks(CTX, 2, os._exit, [3]))
+    assert time.monotonic() - t0 < 60
+    _no_children_left()
+
+
+def test_closing_the_iterator_stops_busy_workers():
+    it = workers.run_tasks(CTX, 2, time.sleep, [0.0, 600.0, 600.0])
+    assert next(it) is None
+    t0 = time.monotonic()
+    it.close()
+    assert time.monotonic() - t0 < 30
+    _no_children_left()
+
+
+def test_death_messages_name_the_cause_and_the_fix():
+    assert "SIGKILL: the out-of-memory killer" in str(workers._death(-signal.SIGKILL))
+    assert "killed by signal SIGSEGV" in str(workers._death(-signal.SIGSEGV))
+    assert "fewer --workers" in str(workers._death(1))
+
+
+def test_errors_cross_the_process_boundary_as_their_own_class():
+    exc = workers._portable(ConfigError("bad value"))
+    assert type(exc) is ConfigError and str(exc) == "bad value"
+    exc = workers._portable(RuntimeError("first line\nsecond line"))
+    assert type(exc) is DataError and str(exc) == "a worker failed (RuntimeError: first line)"
