@@ -41,7 +41,7 @@ KINDS = ("table", "table edge", "tray", "unknown")
 
 def support_kind(scene: dict | None) -> str:
     """The support a simulated frame shows, from its scene record (``unknown`` without one)."""
-    sup = (scene or {}).get("params", {}).get("support") if isinstance(scene, dict) else None
+    sup = scene.get("params", {}).get("support") if isinstance(scene, dict) else None
     if not isinstance(sup, dict):
         return "unknown"
     return "tray" if sup.get("tray") else ("table edge" if sup.get("table_edge") else "table")
@@ -64,7 +64,8 @@ def phantoms(data: Path, models: list[Path | None], limit: int | None = None) ->
     """
     segs = {str(m) if m is not None else "default": Segmenter(m, threads=2) for m in models}
     base = PlaneBaseline()
-    min_px = next(iter(segs.values())).min_object_px
+    first = next(iter(segs.values()))
+    min_px, sensor = first.min_object_px, first.meta.sensor  # the plane fit reads frames as the first model
     counts: dict[str, dict[str, list[int]]] = {}
     frames, _n = open_frames(data, extras=("scene",))
     seen = 0
@@ -77,7 +78,6 @@ def phantoms(data: Path, models: list[Path | None], limit: int | None = None) ->
         valid = valid_mask(fr.depth)
         kind = support_kind(fr.scene)
         px = {name: int(((s.predict(fr.depth).mask == 1) & valid).sum()) for name, s in segs.items()}
-        sensor = next(iter(segs.values())).meta.sensor
         plane = base.predict(fr.depth, intrinsics_for(fr.depth.shape, fr.info, sensor)).astype(bool) & valid
         px["plane fit"] = int(plane.sum())
         px["plane fit + specks"] = int(remove_specks(plane, min_px).sum())
