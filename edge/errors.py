@@ -15,6 +15,7 @@ __all__ = [
     "ModelError",
     "ThresholdError",
     "MissingExtraError",
+    "first_line",
 ]
 
 
@@ -44,3 +45,18 @@ class ThresholdError(DepthsegError):
 
 class MissingExtraError(DepthsegError):
     """A module of an optional extra (``pip install 'depthseg[train]'``...) that this command needs is missing."""
+
+
+def first_line(exc: BaseException, limit: int | None = None) -> str:
+    """The first line of an exception's message for a one-line error (its class name when empty).
+
+    Why one helper: library errors (onnx, Ray, numpy) quote whole tracebacks or reports; a
+    depthseg message quotes their first line only, and an empty message must not fail the quoting.
+
+    Args:
+        exc: the exception to quote.
+        limit: cut the line to at most this many characters (None: whole).
+    """
+    text = str(exc).strip()
+    line = text.splitlines()[0] if text else type(exc).__name__
+    return line if limit is None else line[:limit]

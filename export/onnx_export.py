@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from edge.errors import ModelError
+from edge.errors import ModelError, first_line
 from edge.infer import INPUT_NAME, OUTPUT_LOGITS
 from edge.io import atomic_path, atomic_write
 from edge.meta import ModelMeta
@@ -94,7 +94,7 @@ def write_onnx(model_proto, out: str | Path) -> Path:
     try:
         onnx.checker.check_model(model_proto, full_check=True)
     except Exception as exc:  # noqa: BLE001 - checker raises several types
-        raise ModelError(f"exported graph fails onnx.checker: {str(exc).splitlines()[0][:200]}") from None
+        raise ModelError(f"exported graph fails onnx.checker: {first_line(exc, 200)}") from None
     with atomic_write(out) as tmp:
         onnx.save_model(model_proto, str(tmp), save_as_external_data=False)
     return out
@@ -151,7 +151,7 @@ def export_onnx(
     except ModelError:
         raise
     except Exception as exc:  # noqa: BLE001 - exporter failures come in many types
-        raise ModelError(f"torch.onnx.export failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
+        raise ModelError(f"torch.onnx.export failed ({type(exc).__name__}: {first_line(exc, 200)})") from None
     finally:
         raw.unlink(missing_ok=True)
         Path(str(raw) + ".data").unlink(missing_ok=True)

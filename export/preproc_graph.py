@@ -66,7 +66,7 @@ from edge.cues import (
     TRIM,
     hypothesis_table,
 )
-from edge.errors import ModelError
+from edge.errors import ModelError, first_line
 from edge.infer import INPUT_NAME, OUTPUT_HEIGHT, OUTPUT_PROB, OUTPUT_VALID, sigmoid
 from edge.io import atomic_path
 from edge.meta import ModelMeta
@@ -489,7 +489,7 @@ def _export(module: nn.Module, meta: ModelMeta, out: str | Path, output_names: l
             )
         return onnx.load(str(raw), load_external_data=False)
     except Exception as exc:  # noqa: BLE001 - exporter failures come in many types
-        raise ModelError(f"torch.onnx.export failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
+        raise ModelError(f"torch.onnx.export failed ({type(exc).__name__}: {first_line(exc, 200)})") from None
     finally:
         raw.unlink(missing_ok=True)
         Path(str(raw) + ".data").unlink(missing_ok=True)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from edge.errors import DataError, ModelError
+from edge.errors import DataError, ModelError, first_line
 from edge.infer import Segmenter, session_options
 from edge.preprocess import preprocess_for
 from edge.sampleframes import FrameSample
@@ -103,7 +103,7 @@ def quantize_int8(fp32_path: str | Path, out: str | Path, calib: FrameSample, pe
                 op_types_to_quantize=QUANT_OPS,
             )
         except Exception as exc:  # noqa: BLE001 - the quantiser raises many types
-            raise ModelError(f"int8 quantisation failed ({type(exc).__name__}: {str(exc).splitlines()[0][:200]})") from None
+            raise ModelError(f"int8 quantisation failed ({type(exc).__name__}: {first_line(exc, 200)})") from None
         proto = onnx.load(str(q))
     props = dict(seg.props)
     props.update(

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from edge.errors import DataError
+from edge.errors import DataError, first_line
 from edge.io import SIM_EPOCH_NS, FrameWriter
 from edge.io.paths import check_input_file, check_outputs
 from edge.meta import fov_intrinsics
@@ -101,7 +101,7 @@ def read_blensor_scan(path: str | Path, width: int = BLENSOR_WIDTH, height: int 
     try:  # mapped, so the shape is checked before a damaged header can ask for any memory
         a = np.load(p, mmap_mode="r", allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
-        first = str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+        first = first_line(exc)
         if "mmap length" in first:
             first = "the file is shorter than its header declares: truncated or damaged"
         raise DataError(f"{p}: not a readable .npy array ({first[:120]})") from None

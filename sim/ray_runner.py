@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from edge.errors import ConfigError, DataError
+from edge.errors import ConfigError, DataError, first_line
 
 __all__ = ["import_ray", "check_address", "check_nodes", "run_shards"]
 
@@ -108,8 +108,7 @@ def check_nodes(ray, engines: dict[str, str], timeout_s: float = PROBE_TIMEOUT_S
             "a worker ('ray status') and run again"
         ) from None
     except ray.exceptions.RayError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise DataError(f"the Ray version check failed ({type(exc).__name__}: {first}); run again") from None
+        raise DataError(f"the Ray version check failed ({type(exc).__name__}: {first_line(exc)}); run again") from None
     for refusal in answers:
         if refusal is not None:
             raise DataError(f"{refusal}; nothing was written")
@@ -208,9 +207,8 @@ def run_shards(
                 cause = getattr(exc, "cause", None)
                 if isinstance(cause, DataError):  # a task's own one-line refusal (another node's versions)
                     raise DataError(f"{cause}; complete shards are kept") from None
-                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
                 raise DataError(
-                    f"a Ray task failed ({type(exc).__name__}: {first}); complete shards are kept: "
+                    f"a Ray task failed ({type(exc).__name__}: {first_line(exc)}); complete shards are kept: "
                     "run the same command again to finish"
                 ) from None
     finally:

@@ -19,7 +19,7 @@ import signal
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from edge.errors import DataError, DepthsegError
+from edge.errors import DataError, DepthsegError, first_line
 
 __all__ = ["run_tasks", "POLL_S"]
 
@@ -31,8 +31,7 @@ def _portable(exc: BaseException) -> DepthsegError:
     """An exception that survives pickling and prints as one line in the parent."""
     if isinstance(exc, DepthsegError):
         return type(exc)(str(exc))
-    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-    return DataError(f"a worker failed ({type(exc).__name__}: {first})")
+    return DataError(f"a worker failed ({type(exc).__name__}: {first_line(exc)})")
 
 
 def _serve(tasks, results, initializer: Callable[..., None] | None, initargs: tuple, func: Callable[[Any], Any]) -> None:
