@@ -437,7 +437,8 @@ def simulate(
                 from sim.workers import run_tasks
 
                 for stats in run_tasks(ctx, workers, _write_shard, todo, initializer=_init_worker,
-                                       initargs=(config.to_dict(), seed, library_paths, str(out), q)):
+                                       initargs=(config.to_dict(), seed, library_paths, str(out), q),
+                                       on_retry=on_warning):
                     record(stats)
         finally:
             stop.set()

@@ -1,7 +1,8 @@
 """`sim.workers.run_tasks`: every result once, the first error as one line, never a hang.
 
 The tasks are stdlib functions (they pickle by name into a spawned worker): `math.sqrt` fails
-on -1, `os._exit` kills its worker, `time.sleep` keeps one busy.
+on -1, `os._exit` ends its worker, `time.sleep` keeps one busy, and `os.system` runs a shell
+that can `kill -9` the worker it runs in (its parent, ``$PPID``).
 """
 
 from __future__ import annotations
@@ -53,6 +54,34 @@ def test_a_worker_that_dies_ends_the_run_instead_of_waiting_forever():
     t0 = time.monotonic()
     with pytest.raises(DataError, match="exited with code 3; run the same command again to resume"):
         list(workers.run_tasks(CTX, 2, os._exit, [3]))
+    assert time.monotonic() - t0 < 60
+    _no_children_left()
+
+
+def _kill_my_worker(marker=None) -> str:
+    """A shell command that SIGKILLs the worker running it (once, if ``marker`` is given)."""
+    if marker is None:
+        return "kill -9 $PPID; sleep 5"
+    return f"test -e {marker} || {{ touch {marker}; kill -9 $PPID; sleep 5; }}"
+
+
+def test_the_task_of_a_killed_worker_goes_to_another_worker(tmp_path):
+    told = []
+    tasks = ["true", _kill_my_worker(tmp_path / "killed-once"), "true", "true", "true"]
+    got = list(workers.run_tasks(CTX, 2, os.system, tasks, on_retry=told.append))
+    assert got == [0] * len(tasks)  # every task once, the killed one run again by the other worker
+    assert (tmp_path / "killed-once").exists()
+    assert told == ["a worker process was killed (SIGKILL: the out-of-memory killer does this); "
+                    "its task goes to the 1 remaining worker"]
+    _no_children_left()
+
+
+def test_the_last_worker_killed_ends_the_run_with_one_line():
+    t0 = time.monotonic()
+    told = []
+    with pytest.raises(DataError, match=r"killed \(SIGKILL.*run the same command again to resume"):
+        list(workers.run_tasks(CTX, 2, os.system, [_kill_my_worker(), _kill_my_worker()], on_retry=told.append))
+    assert len(told) == 1  # the first death handed its task on; the second left nobody
     assert time.monotonic() - t0 < 60
     _no_children_left()
 
