@@ -178,7 +178,7 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
             inv += int(np.count_nonzero(f.depth == 0))
             pix += f.label.size
             if _W["queue"] is not None:
-                _W["queue"].put(1)
+                _W["queue"].put(task)  # which shard: a retried shard's frames are not counted twice
     return {
         "file": path.name,
         "frames": stop - start,
@@ -190,6 +190,19 @@ def _write_shard(task: tuple[int, int]) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- main side
+
+
+def count_frame_once(counted: dict[int, int], task: tuple[int, int]) -> bool:
+    """Whether a frame reported by a worker for shard ``task`` = (start, stop) is new progress.
+
+    A killed worker's shard is made again from its first frame (`sim.workers`), so its first
+    frames are reported twice; counting at most ``stop - start`` per shard keeps the progress
+    bar at or below the total. ``counted`` maps shard start to frames counted so far.
+    """
+    start, stop = task
+    n = counted.get(start, 0) + 1
+    counted[start] = n
+    return n <= stop - start
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
@@ -398,14 +411,18 @@ def simulate(
         bar = progress(total=int(frames), initial=int(frames) - n_todo, desc=TOOL, unit="frame", disable=None if show_progress is None else not show_progress)
         stop = threading.Event()
 
+        counted: dict[int, int] = {}  # frames counted per shard start (<= MAX_SHARDS entries)
+
         def pump() -> None:
             while not stop.is_set():
                 try:
-                    bar.update(q.get(timeout=0.2))
+                    start, stop_ = q.get(timeout=0.2)
                 except queue.Empty:
                     continue
                 except (EOFError, OSError):
                     return
+                if count_frame_once(counted, (start, stop_)):
+                    bar.update(1)
 
         th = threading.Thread(target=pump, daemon=True)
         th.start()

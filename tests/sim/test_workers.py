@@ -106,3 +106,16 @@ def test_errors_cross_the_process_boundary_as_their_own_class():
     assert type(exc) is ConfigError and str(exc) == "bad value"
     exc = workers._portable(RuntimeError("first line\nsecond line"))
     assert type(exc) is DataError and str(exc) == "a worker failed (RuntimeError: first line)"
+
+
+def test_a_retried_shard_counts_its_frames_once():
+    """The progress bar's rule: a shard made again after a kill never counts past its size."""
+    from sim.dataset import count_frame_once
+
+    counted: dict[int, int] = {}
+    first = [count_frame_once(counted, (20, 30)) for _ in range(4)]  # killed after 4 frames
+    again = [count_frame_once(counted, (20, 30)) for _ in range(10)]  # made again, all 10
+    other = [count_frame_once(counted, (30, 35)) for _ in range(5)]
+    assert first == [True] * 4
+    assert again == [True] * 6 + [False] * 4
+    assert sum(first + again) == 10 and all(other)
