@@ -416,12 +416,12 @@ def simulate(
         def pump() -> None:
             while not stop.is_set():
                 try:
-                    start, stop_ = q.get(timeout=0.2)
+                    task = q.get(timeout=0.2)  # (start, stop) of the frame's shard
                 except queue.Empty:
                     continue
                 except (EOFError, OSError):
                     return
-                if count_frame_once(counted, (start, stop_)):
+                if count_frame_once(counted, task):
                     bar.update(1)
 
         th = threading.Thread(target=pump, daemon=True)
