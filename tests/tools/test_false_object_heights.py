@@ -54,3 +54,20 @@ def test_a_raised_rim_and_a_table_level_rim_are_told_apart(tmp_path):
 def test_the_split_needs_the_table_level_below_the_rule(tmp_path):
     with pytest.raises(ConfigError, match="below the rule's line"):
         load_tool("false_object_heights.py").height_split(tmp_path / "none.mcap", None, low_m=0.01, rule_m=0.01)
+
+
+def test_the_ceiling_makes_the_labels_table_level_object_pixels_table(tmp_path):
+    h, w = 60, 80
+    depth = np.full((h, w), 0.30, np.float32)
+    label = np.zeros((h, w), np.uint8)
+    depth[20:40, 30:50], label[20:40, 30:50] = 0.25, 1  # a 5 cm box
+    label[20:40, 50] = 1  # its right outline: labelled object, but the range reads the table (a mixed pixel)
+    path = tmp_path / "f.mcap"
+    with FrameWriter(path) as fw:
+        fw.write(0, depth, label, (60.0, 60.0, 40.0, 30.0))
+    r = load_tool("false_object_heights.py").height_split(path, _FixedMask(label))
+    # the 20 table-level outline pixels go, and the box's 4 corners, which the labeller's 3 x 3
+    # median puts at table level (5 of their 9 neighbours are table); nothing else
+    assert r["ceiling_iou"] == pytest.approx(100 * (420 - 24) / 420)
+    assert r["ceiling_pooled_iou"] == pytest.approx(r["ceiling_iou"])
+    assert r["fp_near"] == r["fn_near"] == 0.0  # the model here is the labels: the ceiling is not its score
