@@ -6,6 +6,7 @@
 # on NCHW copies (--nchw-bn-channels 8); BENCHMARKS.md "candidate C8n, results".
 #
 #   bash tools/train_default.sh            # 58.8 and 56.1 min from nothing (bit for bit) on a 2-core AMD EPYC with AVX-512 on 2026-12-07
+#                                          # (77.9 min, other weights, on one without AVX-512 on 2026-12-08)
 #                                          # (simulation 5.4 min, training 49.6 min); the machines of these sessions
 #                                          # drift up to ~1.6x between days (C8's recipe without the last flag: 105
 #                                          # and 108 min on the slow 2026-12-06), so the 60-minute budget holds on
