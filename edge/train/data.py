@@ -21,7 +21,8 @@ from edge.meta import ModelMeta
 from edge.preprocess import input_options, padded_shape, preprocess_for
 
 __all__ = ["FrameSet", "PreparedSet", "PREPROCESS_MODES", "load_frames", "prepare_frames", "prepared_bytes", "preprocess_mode", "RESERVE_BYTES",
-           "available_memory_bytes", "split_indices", "make_batch", "parse_crop", "check_crop", "data_identity"]
+           "available_memory_bytes", "split_indices", "make_batch", "parse_crop", "check_crop", "data_identity",
+           "shard_counts_digest"]
 
 PREPROCESS_MODES = ("once", "per-batch")  # `depthseg-train --preprocess`: PreparedSet or FrameSet batches
 MANIFEST_KEYS = ("tool", "seed", "frames", "config_digest", "engines", "provenance")  # what names a simulated set
@@ -252,8 +253,42 @@ def data_identity(paths: list[str | Path]) -> list[dict]:
             m = None
         if isinstance(m, dict):
             rec.update({k: m[k] for k in MANIFEST_KEYS if k in m})
+            counts = shard_counts_digest(m.get("shards"))
+            if counts is not None:
+                rec["shard_counts_digest"] = counts
         out.append(rec)
     return out
+
+
+SHARD_COUNT_KEYS = ("file", "frames", "pixels", "object_pixels", "invalid_pixels")  # not "seconds": timings vary
+
+
+def shard_counts_digest(shards) -> str | None:
+    """sha256 of each shard's name and pixel counts in a simulator manifest, or None without them.
+
+    Why: the same seed, config and engines made other frames on a CPU with AVX-512 than without
+    (BENCHMARKS.md, "candidate nb8, results": all ten held-out sets differ from their digests), and
+    a retrained model could not say whether it saw the shipped model's frames without those
+    gigabytes at hand. The object and invalid pixel counts of
+    every shard change with any change of a drop or of the sensor model, so equal digests mean the
+    same frames in all but a vanishing case, and unequal ones mean other frames; it costs no read
+    of a frame.
+
+    Args:
+        shards: the manifest's ``shards`` mapping (file name -> its record).
+    """
+    import hashlib
+    import json
+
+    if not isinstance(shards, dict) or not shards:
+        return None
+    rows = []
+    for name in sorted(shards):
+        rec = shards[name]
+        if not isinstance(rec, dict) or any(k not in rec for k in SHARD_COUNT_KEYS):
+            return None
+        rows.append([rec[k] for k in SHARD_COUNT_KEYS])
+    return hashlib.sha256(json.dumps(rows, separators=(",", ":")).encode()).hexdigest()
 
 
 def split_indices(n: int, fractions: tuple[float, float, float], seed: int,

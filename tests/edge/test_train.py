@@ -273,6 +273,15 @@ def test_the_training_record_names_what_made_each_data_set(tmp_path) -> None:
     (tmp_path / "broken" / "manifest.json").write_text("{not json")
     got = data_identity([sim, tmp_path / "rec.mcap", tmp_path / "broken"])
     assert got[0] == {"path": str(sim), **{k: v for k, v in man.items() if k != "shards"}}  # no per-shard stats
+    # with the simulator's per-shard counts, a digest of them names the frames themselves
+    shard = {"file": "f", "frames": 100, "pixels": 3830400, "object_pixels": 909616, "invalid_pixels": 87797,
+             "seconds": 3.6}
+    (sim / "manifest.json").write_text(json.dumps({**man, "shards": {"f": shard}}))
+    first = data_identity([sim])[0]["shard_counts_digest"]
+    (sim / "manifest.json").write_text(json.dumps({**man, "shards": {"f": {**shard, "seconds": 9.9}}}))
+    assert data_identity([sim])[0]["shard_counts_digest"] == first  # timings do not count
+    (sim / "manifest.json").write_text(json.dumps({**man, "shards": {"f": {**shard, "object_pixels": 909615}}}))
+    assert data_identity([sim])[0]["shard_counts_digest"] != first  # one pixel does
     assert got[1:] == [{"path": str(tmp_path / "rec.mcap")}, {"path": str(tmp_path / "broken")}]
     _write_tiny_mcap(tmp_path / "x")
     assert train_main(["--data", str(tmp_path / "x"), "--out", str(tmp_path / "cli"), "--epochs", "1", "--width",
