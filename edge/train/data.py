@@ -269,10 +269,9 @@ def shard_counts_digest(shards) -> str | None:
     Why: the same seed, config and engines made other frames on a CPU with AVX-512 than without
     (BENCHMARKS.md, "candidate nb8, results": all ten held-out sets differ from their digests), and
     a retrained model could not say whether it saw the shipped model's frames without those
-    gigabytes at hand. The object and invalid pixel counts of
-    every shard change with any change of a drop or of the sensor model, so equal digests mean the
-    same frames in all but a vanishing case, and unequal ones mean other frames; it costs no read
-    of a frame.
+    gigabytes at hand. The object and invalid pixel counts of every shard change with any change of
+    a drop or of the sensor model, so equal digests mean the same frames in all but a vanishing
+    case, and unequal ones mean other frames; it costs no read of a frame.
 
     Args:
         shards: the manifest's ``shards`` mapping (file name -> its record).
