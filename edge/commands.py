@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from edge.cliutil import require
-from edge.defaults import SUFFIXES, is_shipped_default, resolve_model, user_models_dir
+from edge.defaults import SUFFIXES, is_shipped_model, resolve_model, user_models_dir
 from edge.errors import ConfigError, DataError
 from edge.evaluate import DEFAULT_BOUNDARY_PX, EvalReport, evaluate
 from edge.io import Frame
@@ -132,14 +132,14 @@ def _tune_frames(data, depth_topic, labels_topic, pseudo: bool, depth_scale: flo
 def tune_destination(model_path: Path, out: str | Path | None, dry_run: bool) -> tuple[Path | None, str]:
     """(file the tuned model goes to, why there): None for a dry run.
 
-    ``out`` when given; the shipped default model is never rewritten: its tuned copy goes to
+    ``out`` when given; a shipped model (the default, the fast option) is never rewritten: its tuned copy goes to
     `edge.defaults.user_models_dir`; any other model is rewritten in place (after a ``.bak`` copy).
     """
     if dry_run:
         return None, "dry run"
     if out is not None:
         return Path(out), "out"
-    if is_shipped_default(model_path):
+    if is_shipped_model(model_path):
         return user_models_dir() / model_path.name, "user"
     return model_path, "in place"
 

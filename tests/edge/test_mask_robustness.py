@@ -2,9 +2,9 @@
 
 With the paper's mean/std standardisation one valid pixel at 4 m (the floor past the table edge,
 a reflection) flipped ~20,000 of ~37,000 valid pixels, and 40 saturated 16UC1 pixels (65535 mm)
-did the same. The shipped model standardises robustly (edge.cues.robust_mean_std), reads the
-height above the dominant plane, and its input treats pixels beyond its sensor's range (4 m) as
-no return, so these must change < 1 % of the mask.
+did the same. The shipped models (the default and the fast option) standardise robustly
+(edge.cues.robust_mean_std), read the height above the dominant plane, and their input treats
+pixels beyond their sensor's range (4 m) as no return, so these must change < 1 % of the mask.
 """
 
 from __future__ import annotations
@@ -16,9 +16,12 @@ from edge.infer import Segmenter
 from edge.sampleframes import synthetic_frame
 
 
-@pytest.fixture(scope="module")
-def shipped() -> Segmenter:
-    return Segmenter(threads=1)
+@pytest.fixture(scope="module", params=["default", "fast"])
+def shipped(request) -> Segmenter:
+    """Each shipped model: the default and the fast option (`edge.defaults.FAST_ONNX`)."""
+    from edge import defaults
+
+    return Segmenter(None if request.param == "default" else defaults.FAST_ONNX, threads=1)
 
 
 def _frames(n: int = 4) -> list[np.ndarray]:

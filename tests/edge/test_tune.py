@@ -490,6 +490,19 @@ def test_without_model_the_shipped_default_is_never_rewritten_its_tuned_copy_goe
     assert (onnx_path.read_bytes(), pt.read_bytes()) == before
 
 
+def test_the_shipped_fast_model_is_never_rewritten_either(tmp_path, monkeypatch):
+    from edge import defaults
+    from edge.commands import tune_destination
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    user = tmp_path / "xdg" / "depthseg" / "models"
+    assert tune_destination(defaults.FAST_ONNX, None, False) == (user / "fast.onnx", "user")
+    assert tune_destination(defaults.FAST_CHECKPOINT, None, False) == (user / "fast.pt", "user")
+    own = tmp_path / "fast.onnx"  # a user's file of the same name is theirs: rewritten in place
+    own.write_bytes(defaults.FAST_ONNX.read_bytes())
+    assert tune_destination(own, None, False) == (own, "in place")
+
+
 def test_the_stored_threshold_is_kept_unless_the_new_one_is_better_on_heldout_frames():
     """Issue 11: a tuned 0.671 was replaced by 0.572 after the report called the new one worse."""
     rng = np.random.default_rng(3)
