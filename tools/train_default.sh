@@ -16,9 +16,10 @@
 #   NAME=fast FLAGS="--width 0.0625" bash tools/train_default.sh
 #                                          # the shipped fast option edge/models/fast.{pt,onnx} (candidate N6): this
 #                                          # recipe at width x0.0625; 49.3 min on an AMD EPYC without AVX-512 on
-#                                          # 2026-12-08: training and export 42.3 min, run as depthseg-train with these
-#                                          # flags by hand (not yet through this script), on the default's frames made
-#                                          # the day before on that CPU in 7.0 min; DATA is shared with the default:
+#                                          # 2026-12-08: training and export 42.3 min (run by hand with these flags;
+#                                          # through this script 45 min beside a test run, the same 95 weight tensors
+#                                          # bit for bit), on the default's frames made the day before on that CPU in
+#                                          # 7.0 min; DATA is shared with the default:
 #                                          # depthseg-sim resumes, so frames already made are not made again
 #
 # 1. simulate 32,000 labelled frames (seed 1; 4 camera views of each of 8,000 settled scenes, which
