@@ -132,8 +132,9 @@ def _tune_frames(data, depth_topic, labels_topic, pseudo: bool, depth_scale: flo
 def tune_destination(model_path: Path, out: str | Path | None, dry_run: bool) -> tuple[Path | None, str]:
     """(file the tuned model goes to, why there): None for a dry run.
 
-    ``out`` when given; a shipped model (the default, the fast option) is never rewritten: its tuned copy goes to
-    `edge.defaults.user_models_dir`; any other model is rewritten in place (after a ``.bak`` copy).
+    ``out`` when given; a shipped model (the default, the fast option) is never rewritten: its tuned
+    copy goes to `edge.defaults.user_models_dir`; any other model is rewritten in place (after a
+    ``.bak`` copy).
     """
     if dry_run:
         return None, "dry run"

@@ -19,8 +19,8 @@ __all__ = ["MODELS_DIR", "DEFAULT_CHECKPOINT", "DEFAULT_ONNX", "FAST_CHECKPOINT"
 MODELS_DIR = Path(__file__).resolve().parent / "models"
 DEFAULT_CHECKPOINT = MODELS_DIR / "default.pt"  # torch checkpoint, 3-channel (paper input)
 DEFAULT_ONNX = MODELS_DIR / "default.onnx"  # single-channel fp32 export of the same weights
-# The fast option (candidate N6, README "Edge deployment"): the default's recipe at width x0.0625,
-# x0.61-0.69 of its whole-frame latency, 0.56 IoU points lower on held-out simulated frames. Never
+# The fast option (candidate N6, README "The fast option"): the default's recipe at width x0.0625,
+# x0.67-0.69 of its whole-frame latency, 0.56 IoU points lower on held-out simulated frames. Never
 # picked implicitly: a user names it with --model.
 FAST_CHECKPOINT = MODELS_DIR / "fast.pt"
 FAST_ONNX = MODELS_DIR / "fast.onnx"
