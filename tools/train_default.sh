@@ -6,21 +6,19 @@
 # on NCHW copies (--nchw-bn-channels 8); BENCHMARKS.md "candidate C8n, results".
 #
 #   bash tools/train_default.sh            # 58.8 and 56.1 min from nothing (bit for bit) on a 2-core AMD EPYC with AVX-512 on 2026-12-07
-#                                          # (77.9 min, other weights, on one without AVX-512 on 2026-12-08)
 #                                          # (simulation 5.4 min, training 49.6 min); the machines of these sessions
 #                                          # drift up to ~1.6x between days (C8's recipe without the last flag: 105
 #                                          # and 108 min on the slow 2026-12-06), so the 60-minute budget holds on
-#                                          # fast days only
+#                                          # fast days only; 77.9 min, other weights, on one without
+#                                          # AVX-512 on 2026-12-08
 #   INSTALL=0 DATA=data/train_v20 RUN=runs/v20 CONFIG=tools/ablation/train_v20.json RECIPE= bash tools/train_default.sh
 #                                          # the previous default v20 (77.9-80.3 min from nothing; its weights bit for bit)
 #   NAME=fast FLAGS="--width 0.0625" bash tools/train_default.sh
 #                                          # the shipped fast option edge/models/fast.{pt,onnx} (candidate N6): this
-#                                          # recipe at width x0.0625; 49.3 min on an AMD EPYC without AVX-512 on
-#                                          # 2026-12-08: training and export 42.3 min (run by hand with these flags;
-#                                          # through this script 45 min beside a test run, the same 95 weight tensors
-#                                          # bit for bit), on the default's frames made the day before on that CPU in
-#                                          # 7.0 min; DATA is shared with the default:
-#                                          # depthseg-sim resumes, so frames already made are not made again
+#                                          # recipe at width x0.0625; 45.1 min on an AMD EPYC without AVX-512 on
+#                                          # 2026-12-08 with the default's frames already made (their simulation took
+#                                          # 7.0 min there; depthseg-sim keeps the shards it finds), the same 95 weight
+#                                          # tensors bit for bit as the shipped file
 #
 # 1. simulate 32,000 labelled frames (seed 1; 4 camera views of each of 8,000 settled scenes, which
 #    makes ~100 frames/s with 2 workers; 20 % of the scenes empty) with the pico flexx sensor model, wider domain

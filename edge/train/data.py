@@ -10,6 +10,8 @@ which `make_batch` only flips, pads and (optionally) crops.
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -241,7 +243,6 @@ def data_identity(paths: list[str | Path]) -> list[dict]:
     Args:
         paths: the ``--data`` / ``--train-dir`` arguments, files or folders.
     """
-    import json
 
     out: list[dict] = []
     for p in paths:
@@ -276,9 +277,6 @@ def shard_counts_digest(shards) -> str | None:
     Args:
         shards: the manifest's ``shards`` mapping (file name -> its record).
     """
-    import hashlib
-    import json
-
     if not isinstance(shards, dict) or not shards:
         return None
     rows = []
