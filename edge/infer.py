@@ -116,11 +116,11 @@ def check_logits(logits: np.ndarray, name: str) -> np.ndarray:
 
     Why: NaN compares false with every threshold, so a broken model (NaN weights, an overflow
     in the graph) would otherwise score as "no objects" and publish empty masks with exit 0.
-    Cost: one float64 sum over the frame (a float32 sum cannot overflow in float64, so the sum is
-    finite exactly when every value is); tens of microseconds for a 224 x 171 frame.
+    Cost: one vectorised pass, ~6 us for a 224 x 171 frame (a float64 sum, finite exactly when
+    every value is, took 20 us on a 2-core AMD EPYC).
     """
     a = np.asarray(logits)
-    if not np.isfinite(np.sum(a, dtype=np.float64)):
+    if not np.isfinite(a).all():
         nan = int(np.isnan(a).sum())
         inf = int(np.isinf(a).sum())
         raise ModelError(
@@ -347,7 +347,7 @@ class Segmenter:
     def _graph_height(self, height: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
         """A graph's ``height`` output, if it is a finite float map of the frame's shape (else `ModelError`)."""
         h = np.asarray(height)
-        if h.shape != tuple(shape) or h.dtype.kind != "f" or not np.isfinite(np.sum(h, dtype=np.float64)):
+        if h.shape != tuple(shape) or h.dtype.kind != "f" or not np.isfinite(h).all():
             raise ModelError(
                 f"{self.name}: its '{OUTPUT_HEIGHT}' output is not a finite float map of the frame's size "
                 f"(shape {h.shape}, dtype {h.dtype}); the model file is broken (re-export it)"

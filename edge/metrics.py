@@ -201,9 +201,10 @@ def segmentation_mask(
     min_height_m: float = 0.0,
 ) -> np.ndarray:
     """The uint8 mask a user sees: 1 object, 0 background (`object_mask`), `UNKNOWN` where not ``valid``."""
-    mask = object_mask(logits, valid, threshold, min_object_px, height_m, min_height_m).astype(np.uint8)
-    mask[~np.asarray(valid, dtype=bool)] = UNKNOWN
-    return mask
+    obj = object_mask(logits, valid, threshold, min_object_px, height_m, min_height_m)  # False where not valid
+    # UNKNOWN x not-valid + object, branch-free (a boolean assignment took 2x as long)
+    mask = np.multiply((~np.asarray(valid, dtype=bool)).view(np.uint8), np.uint8(UNKNOWN))
+    return np.bitwise_or(mask, obj.view(np.uint8), out=mask)
 
 
 def confusion(pred: np.ndarray, label: np.ndarray, valid: np.ndarray | None = None) -> Confusion:

@@ -54,9 +54,8 @@ def check_min_px(min_px: int) -> int:
 class _Components:
     """The 8-connected components of a bool mask: pixel counts per component and a per-pixel lookup.
 
-    Both rules run on every frame, so the usual frame (a few dozen components) takes 8-bit labels,
-    OpenCV's histogram and lookup table: half the time of the general numpy path, which handles
-    any count.
+    Both rules run on every frame, so the usual frame (a few dozen components) takes 8-bit labels
+    and OpenCV's lookup table: faster than the general numpy path, which handles any count.
     """
 
     def __init__(self, objects: np.ndarray) -> None:
@@ -69,10 +68,11 @@ class _Components:
         self.labels = labels.astype(np.uint8) if self.few else labels
 
     def counts(self, where: np.ndarray | None = None) -> np.ndarray:
-        """Pixels of each component (index 0, the background, is not meaningful), only those in ``where``."""
-        if self.few:
-            mask = None if where is None else where.view(np.uint8)
-            return cv2.calcHist([self.labels], [0], mask, [256], [0, 256]).ravel()[: self.n]
+        """Pixels of each component (index 0, the background, is not meaningful), only those in ``where``.
+
+        Counted over the object pixels (or ``where``) only: gathering them and counting takes 30 us
+        on a frame where OpenCV's histogram of all labels took 54 (a 2-core AMD EPYC).
+        """
         return np.bincount(self.labels[self.objects if where is None else where], minlength=self.n)
 
     def pixels_of(self, chosen: np.ndarray) -> np.ndarray:

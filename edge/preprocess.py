@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from edge.cues import CUES, height_cue, robust_mean_std, steepness_cue
+from edge.cues import CUES, height_cue, robust_mean_std, steepness_cue, zero_where_invalid
 from edge.errors import DataError
 
 if TYPE_CHECKING:
@@ -91,7 +91,11 @@ def valid_mask(depth: np.ndarray, max_range_m: float = math.inf) -> np.ndarray:
     """
     depth = _as_frame(depth)
     with np.errstate(invalid="ignore"):
-        return np.isfinite(depth) & (depth > 0) & (depth <= np.float32(max_range_m))
+        ok = depth > 0  # False for NaN and -inf
+        if math.isfinite(max_range_m):
+            ok &= depth <= np.float32(max_range_m)  # False for NaN and +inf: no isfinite pass needed
+            return ok
+        return ok & np.isfinite(depth)
 
 
 def valid_for(depth: np.ndarray, meta) -> np.ndarray:
@@ -124,9 +128,7 @@ def standardize(
             t -= mean
             t /= std
         np.clip(t, -ROBUST_CLIP, ROBUST_CLIP, out=t)
-        z = np.zeros(depth.shape, dtype=np.float32)
-        np.copyto(z, t, casting="unsafe", where=valid)
-        return z, mean, std
+        return zero_where_invalid(t.astype(np.float32), valid), mean, std
     out = np.zeros(depth.shape, dtype=np.float32)
     n = int(valid.sum())
     if n == 0:
