@@ -236,7 +236,7 @@ def height_cue(depth: np.ndarray, valid: np.ndarray) -> np.ndarray:
     fit = fit_dominant_plane(depth, valid)
     d = depth if depth.dtype == np.float32 else depth.astype(np.float32)
     with np.errstate(invalid="ignore", over="ignore"):  # invalid pixels (NaN, inf) are zeroed below
-        h = np.subtract(fit.depth(depth.shape), d)  # in place: the float32 operations of clip((zp - d) * scale)
+        h = np.subtract(fit.depth(depth.shape), d)  # clip((zp - d) * scale), float32, as before
         h *= np.float32(HEIGHT_SCALE)
         np.clip(h, *HEIGHT_CLIP, out=h)
     return zero_where_invalid(h, valid)

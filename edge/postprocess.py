@@ -55,7 +55,8 @@ class _Components:
     """The 8-connected components of a bool mask: pixel counts per component and a per-pixel lookup.
 
     Both rules run on every frame, so the usual frame (a few dozen components) takes 8-bit labels
-    and OpenCV's lookup table: faster than the general numpy path, which handles any count.
+    and OpenCV's lookup table for the pixels of chosen components: faster than numpy's indexing,
+    the path for any count.
     """
 
     def __init__(self, objects: np.ndarray) -> None:
