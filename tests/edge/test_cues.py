@@ -5,7 +5,27 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from edge.cues import HEIGHT_CLIP, fit_dominant_plane, height_cue, robust_mean_std, steepness_cue
+from edge.cues import (
+    BEYOND_M,
+    BEYOND_WEIGHT,
+    HEIGHT_CLIP,
+    INLIER_M,
+    MIN_POINTS,
+    REACH_M,
+    REFINE_ITERS,
+    STATS_STRIDE,
+    TRIM,
+    PlaneFit,
+    _grid,
+    _quantiles,
+    _solve3,
+    fit_dominant_plane,
+    height_cue,
+    hypothesis_table,
+    robust_mean_std,
+    steepness_cue,
+    zero_where_invalid,
+)
 from edge.meta import ModelMeta
 from edge.preprocess import ROBUST_CLIP, preprocess, preprocess_for, standardize, valid_mask
 
@@ -142,7 +162,6 @@ def test_preprocess_adds_cue_channels_after_the_depth_copies() -> None:
 
 def test_quantiles_are_numpys_value_for_value() -> None:
     # the edge path replaces np.quantile by one partition; the trimming bounds must not move
-    from edge.cues import TRIM, _quantiles
 
     rng = np.random.default_rng(7)
     for n in (1, 2, 3, 57, 1000, 2431):
@@ -194,3 +213,87 @@ def test_steepness_needs_the_sensor_and_rides_in_input_options() -> None:
     np.testing.assert_array_equal(p.x[2, :H, :W], steepness_cue(z, valid_mask(z), meta.sensor.intrinsics_for_size(H, W)))
     with pytest.raises(Exception, match="needs the camera's intrinsics"):
         preprocess(z, 1, cues=("steepness",))
+
+
+def _plain_plane_fit(depth: np.ndarray, valid: np.ndarray, stride: int = 6) -> tuple[float, float, float, bool, float]:
+    """The plane fit's rule written plainly (the clamp, three counts, LAPACK's determinant), as before 2026-12-08."""
+    vv, uu = np.nonzero(valid[::stride, ::stride])
+    z = depth[::stride, ::stride][vv, uu].astype(np.float64)
+    u, v = uu.astype(np.float64) * stride, vv.astype(np.float64) * stride
+    n = len(z)
+    assert n >= MIN_POINTS
+    q = 1.0 / z
+    idx = np.minimum((hypothesis_table() * n).astype(np.int64), n - 1)
+    a, b, c, ok = _solve3(u[idx], v[idx], q[idx])
+    inv = (a.astype(np.float32)[:, None] * u.astype(np.float32) + b.astype(np.float32)[:, None] * v.astype(np.float32)) \
+        + c.astype(np.float32)[:, None]
+    ok &= inv.min(axis=1) > 1e-6
+    r = z.astype(np.float32) - np.float32(1.0) / np.maximum(inv, np.float32(1e-6))
+    score = (np.count_nonzero(np.abs(r) < INLIER_M, axis=1)
+             - BEYOND_WEIGHT * (np.count_nonzero((r > BEYOND_M) & (r <= REACH_M), axis=1)
+                                + np.count_nonzero(r < -REACH_M, axis=1)))
+    best = int(np.argmax(np.where(ok, score, -np.inf)))
+    plane = (float(a[best]), float(b[best]), float(c[best]))
+    inl = np.abs(r[best]) < INLIER_M
+    for _ in range(REFINE_ITERS):
+        uu_, vv_, qq_ = u[inl], v[inl], q[inl]
+        ata = np.array([[uu_ @ uu_, uu_ @ vv_, uu_.sum()], [uu_ @ vv_, vv_ @ vv_, vv_.sum()],
+                        [uu_.sum(), vv_.sum(), float(len(uu_))]])
+        if len(qq_) < 3 or abs(np.linalg.det(ata)) < 1e-9:
+            break
+        sol = np.linalg.solve(ata, np.array([uu_ @ qq_, vv_ @ qq_, qq_.sum()]))
+        inv1 = sol[0] * u + sol[1] * v + sol[2]
+        if np.any(inv1 <= 1e-6):
+            break
+        plane = (float(sol[0]), float(sol[1]), float(sol[2]))
+        inl = np.abs(z - 1.0 / inv1) < INLIER_M
+    return (*plane, True, float(inl.mean()))
+
+
+def test_plane_fit_equals_its_plain_rule_value_for_value() -> None:
+    # the edge path skips the clamp of hypotheses that are not ok, counts in 16-bit lanes and
+    # merges the two against-counts: none of it may move the plane
+    rng = np.random.default_rng(11)
+    behind = 0
+    for k in range(12):
+        z, _ = _scene(rng)
+        if k % 3 == 1:
+            z[:, 100:] += 0.35  # past a table edge: the floor, 35 cm lower, more of the view than the table
+        if k % 3 == 2:
+            z[30:60, 40:200] -= 0.25  # a box top the size of a third of the view
+        valid = valid_mask(z)
+        fit = fit_dominant_plane(z, valid)
+        assert (fit.a, fit.b, fit.c, fit.ok, fit.inlier_share) == _plain_plane_fit(z, valid)
+        u, v, g = _grid(z, valid, 6)
+        i = np.minimum((hypothesis_table() * len(g)).astype(np.int64), len(g) - 1)
+        a, b, c, _ok = _solve3(u[i], v[i], 1.0 / g[i])
+        behind += int(np.sum((a[:, None] * u + b[:, None] * v + c[:, None]).min(axis=1) <= 1e-6))
+    assert behind > 0  # some hypotheses had a point at or behind the camera: the skipped clamp was exercised
+
+
+def test_plane_depth_clamps_a_plane_that_crosses_behind_the_camera() -> None:
+    for a, b, c in ((-0.02, 0.0, 1.5), (0.0, -0.03, 2.0), (0.01, 0.002, 3.0), (0.0, 0.0, 1e-9)):
+        inv = (np.float32(a) * np.arange(W, dtype=np.float32)[None, :] + np.float32(b) * np.arange(H, dtype=np.float32)[:, None]) \
+            + np.float32(c)
+        plain = np.float32(1.0) / np.maximum(inv, np.float32(1e-6))
+        np.testing.assert_array_equal(PlaneFit(a, b, c, True, 1.0).depth((H, W)), plain)
+
+
+def test_zero_where_invalid_writes_positive_zeros_and_keeps_the_rest() -> None:
+    a = np.array([[1.5, np.nan, -np.inf, -2.0], [np.inf, 0.25, -0.0, 7.0]], np.float32)
+    valid = np.array([[True, False, False, True], [False, True, False, True]])
+    out = zero_where_invalid(a.copy(), valid)
+    assert np.array_equal(out[valid], a[valid])
+    assert np.all(out[~valid].view(np.uint32) == 0)  # +0.0 bit for bit, whatever the pixel held
+
+
+def test_robust_statistics_are_numpys_mean_and_std() -> None:
+    rng = np.random.default_rng(2)
+    for n in (12, 13, 400, 2289, 6000):
+        for dtype in (np.float32, np.float64):
+            d = (rng.normal(0.3, 0.05, (1, n * STATS_STRIDE))).astype(dtype)
+            valid = np.ones_like(d, dtype=bool)
+            vals = d[::STATS_STRIDE, ::STATS_STRIDE].ravel().astype(np.float64)
+            lo, hi = _quantiles(vals, TRIM)
+            core = vals[(vals >= lo) & (vals <= hi)]
+            assert robust_mean_std(d, valid, 1e-6) == (float(core.mean()), max(float(core.std()), 1e-6))
