@@ -162,7 +162,6 @@ def test_preprocess_adds_cue_channels_after_the_depth_copies() -> None:
 
 def test_quantiles_are_numpys_value_for_value() -> None:
     # the edge path replaces np.quantile by one partition; the trimming bounds must not move
-
     rng = np.random.default_rng(7)
     for n in (1, 2, 3, 57, 1000, 2431):
         for vals in (rng.random(n), np.round(rng.random(n), 2), rng.normal(0.3, 0.01, n)):
