@@ -49,6 +49,7 @@ __all__ = [
     "steepness_cue",
     "robust_mean_std",
     "zero_where_invalid",
+    "det3",
     "GRID_STRIDE",
     "N_HYPOTHESES",
     "MAX_MIN_HEIGHT_M",
@@ -148,8 +149,12 @@ def _count_rows(mask: np.ndarray) -> np.ndarray:
     return np.add.reduce(mask.view(np.uint8), axis=1, dtype=np.int64 if wide else np.uint16).astype(np.int64)
 
 
-def _det3(a1: float, b1: float, c1: float, a2: float, b2: float, c2: float, a3: float, b3: float, c3: float) -> float:
-    """Determinant of the 3 x 3 matrix of rows (a_i, b_i, c_i)."""
+def det3(a1, b1, c1, a2, b2, c2, a3, b3, c3):
+    """Determinant of the 3 x 3 matrix of rows (a_i, b_i, c_i), term by term.
+
+    One expansion for the numpy fit (on exact integers, `_lstsq`) and the ``--with-preprocessing``
+    graph (on float64 tensors, Cramer's rule, `export.preproc_graph`): any operands with ``*`` and ``-``.
+    """
     return a1 * (b2 * c3 - c2 * b3) - b1 * (a2 * c3 - c2 * a3) + c1 * (a2 * b3 - b2 * a3)
 
 
@@ -164,7 +169,7 @@ def _lstsq(u: np.ndarray, v: np.ndarray, q: np.ndarray) -> tuple[float, float, f
     if n < 3:
         return None
     su, sv, suu, suv, svv = float(u.sum()), float(v.sum()), float(u @ u), float(u @ v), float(v @ v)
-    if _det3(*(int(x) for x in (suu, suv, su, suv, svv, sv, su, sv, n))) == 0:
+    if det3(*(int(x) for x in (suu, suv, su, suv, svv, sv, su, sv, n))) == 0:
         return None
     ata = np.array([[suu, suv, su], [suv, svv, sv], [su, sv, float(n)]])
     sol = np.linalg.solve(ata, np.array([u @ q, v @ q, q.sum()]))

@@ -64,6 +64,7 @@ from edge.cues import (
     STATS_STRIDE,
     STEEP_STEP,
     TRIM,
+    det3,
     hypothesis_table,
 )
 from edge.errors import ModelError, first_line
@@ -297,9 +298,6 @@ class PreprocGraph(nn.Module):
         su, sv, n = msum(u), msum(v), msum(torch.ones_like(q))
         suu, suv, svv = msum(u * u), msum(u * v), msum(v * v)
         suq, svq, sq = msum(u * q), msum(v * q), msum(q)
-
-        def det3(a1, b1, c1, a2, b2, c2, a3, b3, c3):  # rows (a_i, b_i, c_i)
-            return a1 * (b2 * c3 - c2 * b3) - b1 * (a2 * c3 - c2 * a3) + c1 * (a2 * b3 - b2 * a3)
 
         det = det3(suu, suv, su, suv, svv, sv, su, sv, n)
         ok = (n >= 3) & (torch.abs(det) >= 1e-9)
